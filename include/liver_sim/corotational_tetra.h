@@ -1,0 +1,59 @@
+// Parenchyma: corotational linear tetrahedra. Rest stiffness K0 = V B^T D B per element is
+// computed once; each evaluation extracts the element rotation R from the current shape and
+// gives f = R K0 (R^T x - X) and the tangent R K0 R^T (the derivative of R is dropped, as usual).
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "liver_sim/options.h"
+
+namespace liver_sim {
+
+using Matrix12d = Eigen::Matrix<double, 12, 12>;
+using Vector12d = Eigen::Matrix<double, 12, 1>;
+
+class CorotationalTetra {
+ public:
+  // X: rest positions (#V x 3, m); T: positively oriented tetrahedra.
+  CorotationalTetra(const Eigen::MatrixX3d& X, const Eigen::MatrixX4i& T,
+                    const ParenchymaOptions& material);
+
+  // Recomputes K0 for a new modulus / Poisson ratio (no other state changes).
+  void set_material(const ParenchymaOptions& material);
+
+  // Updates the rotation of every element from current positions x (3 #V, node-major).
+  void update_rotations(const Eigen::VectorXd& x);
+
+  // Element internal force (12, the force the element needs to be held in shape x) and
+  // tangent, using the rotation from the last update_rotations.
+  void element_force(int e, const Eigen::VectorXd& x, Vector12d& f) const;
+  void element_tangent(int e, Matrix12d& K) const;
+
+  // Rotation of element e from the last update; rest stiffness; rest volume (m^3).
+  const Eigen::Matrix3d& rotation(int e) const { return R_[e]; }
+  const Matrix12d& rest_stiffness(int e) const { return K0_[e]; }
+  double volume(int e) const { return volume_[e]; }
+  int size() const { return static_cast<int>(K0_.size()); }
+  const Eigen::MatrixX4i& elements() const { return T_; }
+
+  // Strain in the element's rotated frame, sym(R^T F) - I (Voigt-free 3x3), for tests and output.
+  Eigen::Matrix3d corotated_strain(int e, const Eigen::VectorXd& x) const;
+
+ private:
+  Eigen::Matrix3d rotation_geometric(int e, const Eigen::VectorXd& x) const;
+  Eigen::Matrix3d rotation_polar(int e, const Eigen::VectorXd& x) const;
+  Eigen::Matrix3d deformation_gradient(int e, const Eigen::VectorXd& x) const;
+
+  Eigen::MatrixX4i T_;
+  RotationMethod method_;
+  std::vector<Vector12d> X_;  // rest positions of the 4 nodes
+  std::vector<Eigen::Matrix3d> Dm_inv_;         // inverse rest edge matrix
+  std::vector<Eigen::Matrix3d> rest_frame_T_;   // transposed edge frame of the rest shape
+  std::vector<Eigen::Matrix<double, 4, 3>> grad_N_;  // shape-function gradients (1/m)
+  std::vector<double> volume_;
+  std::vector<Matrix12d> K0_;
+  std::vector<Eigen::Matrix3d> R_;
+};
+
+}  // namespace liver_sim

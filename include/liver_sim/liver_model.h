@@ -1,0 +1,150 @@
+// The composite liver model: corotational tetrahedra (parenchyma) + corotational CST membranes
+// on the boundary (Glisson's capsule) in one stiffness matrix, fixed nodes, loads, and a
+// Newton / backward-Euler solver on CHOLMOD. ROS-free.
+#pragma once
+
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "liver_sim/cholmod_solver.h"
+#include "liver_sim/corotational_tetra.h"
+#include "liver_sim/gmres.h"
+#include "liver_sim/membrane_cst.h"
+#include "liver_sim/mesh.h"
+#include "liver_sim/scene.h"
+#include "liver_sim/sparse_pattern.h"
+
+namespace liver_sim {
+
+// Wall time of one step by phase (ms).
+struct StepTiming {
+  double assembly_ms = 0;       // rotation update, internal/external forces, tangent assembly
+  double factorization_ms = 0;  // CHOLMOD numeric factorisations
+  double solve_ms = 0;          // GMRES: triangular solves and Jacobian products
+  double total_ms = 0;
+};
+
+struct StepResult {
+  enum class Status {
+    Converged,     // residual below tolerance
+    NotConverged,  // iteration cap reached; the state is kept (it may converge next step)
+    Diverged       // non-finite values or a matrix that is not positive definite: rolled back
+  };
+  Status status = Status::Converged;
+  int iterations = 0;         // Newton iterations (factorisations) in this step
+  int linear_iterations = 0;  // GMRES iterations (preconditioned solves) in this step
+  double residual = 0;      // force residual relative to the load norm, at the end
+  StepTiming timing;
+  std::string message;      // why, when not converged
+  bool converged() const { return status == Status::Converged; }
+};
+
+// Builds the mesh a scene asks for (box or file). Throws MeshError / SceneError.
+TetMesh load_scene_mesh(const Scene& scene);
+
+class LiverModel {
+ public:
+  // Precomputes element matrices, the matrix pattern, scatter maps and the CHOLMOD analysis.
+  // Throws std::invalid_argument naming the problem (invalid option, region selecting nothing,
+  // probe outside the mesh, a static scene with nothing fixed).
+  LiverModel(TetMesh mesh, const Scene& scene);
+
+  // Static mode: Newton to equilibrium under the loads times load_scale(). Dynamic mode: one
+  // backward-Euler time step of solver.dt. A diverging step restores the state before it.
+  StepResult step();
+
+  // Static load continuation: loads are multiplied by this factor (default 1).
+  void set_load_scale(double s) { load_scale_ = s; }
+  double load_scale() const { return load_scale_; }
+
+  // Capsule on/off, E, h, nu, region: takes effect at the next step with no mesh reload and no
+  // new symbolic analysis. Returns "" on success, else the validation message (nothing changed).
+  std::string set_capsule(const CapsuleOptions& capsule);
+  const CapsuleOptions& capsule() const { return capsule_; }
+
+  // Back to the rest shape, zero velocity, time 0; parameters are kept.
+  void reset();
+
+  const TetMesh& mesh() const { return mesh_; }
+  const Eigen::MatrixX3i& boundary() const { return boundary_; }
+  const Eigen::VectorXd& positions() const { return x_; }  // 3 #V, node-major (m)
+  Eigen::VectorXd displacement() const { return x_ - X_; }
+  double time() const { return time_; }
+  int capsule_triangles() const;  // membrane triangles in use (0 when disabled)
+  const SolverOptions& solver_options() const { return solver_; }
+
+  int num_probes() const { return static_cast<int>(probes_.size()); }
+  const std::string& probe_name(int i) const { return probes_[i].name; }
+  Eigen::Vector3d probe_displacement(int i) const;
+
+  // Internal elastic forces (tetrahedra + active membranes) at positions x; updates rotations.
+  void internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f);
+  // External forces at positions x (follower pressure on the current triangles), unscaled.
+  void external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
+
+  // Overwrites the current state (tests start from a given configuration).
+  void set_positions(const Eigen::VectorXd& x) { x_ = x; }
+
+  const SparsePattern& pattern() const { return pattern_; }
+  CholmodSolver& linear_solver() { return solver_cholmod_; }
+
+ private:
+  struct Probe {
+    std::string name;
+    int tet;
+    Eigen::Vector4d barycentric;
+  };
+  struct PressureLoad {
+    double pressure;
+    std::vector<int> triangles;  // rows of boundary_
+  };
+  struct NodalLoad {
+    Eigen::Vector3d force;  // per node (N)
+    std::vector<int> nodes;
+  };
+
+  std::vector<int> select_nodes(const Region& r, const std::string& what) const;
+  std::vector<int> select_triangles(const Region& r, const std::string& what) const;
+  void set_fixed(const std::vector<int>& nodes);
+  // Residual r = loads - internal - inertia - damping at x (dynamic terms use x_start_, v_).
+  // Returns its free-DOF norm and the reference norm it is measured against.
+  double residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference);
+  // Tangent of -residual into system_ (fixed DOFs become identity rows), with the element
+  // rotations of the last residual() call: the solver always assembles where it last evaluated.
+  void assemble_system();
+
+  TetMesh mesh_;
+  Eigen::MatrixX3i boundary_;
+  std::vector<char> on_boundary_;  // per node
+  SolverOptions solver_;
+  ParenchymaOptions parenchyma_;
+  CapsuleOptions capsule_;
+  CorotationalTetra tetra_;
+  MembraneCST membrane_;               // all boundary triangles; capsule_active_ selects
+  std::vector<int> capsule_active_;
+  SparsePattern pattern_;
+  std::vector<int> tet_map_, tri_map_;  // scatter maps, 144 per tetrahedron, 81 per triangle
+  std::vector<double> stiffness_, system_;
+  std::vector<double> damping_stiffness_;  // K at the start of a dynamic step (Rayleigh b K)
+  std::vector<int> fixed_entries_;      // off-diagonal values in fixed rows/columns
+  std::vector<char> fixed_dof_;
+  CholmodSolver solver_cholmod_;
+
+  Eigen::VectorXd X_, x_, v_, x_start_;
+  Eigen::VectorXd mass_;  // lumped, per DOF (kg)
+  std::vector<PressureLoad> pressures_;
+  std::vector<NodalLoad> nodal_loads_;  // gravity and spread forces
+  std::vector<Probe> probes_;
+  double load_scale_ = 1.0;
+  double time_ = 0.0;
+  double force_floor_;   // absolute residual floor (N) for load-free states
+  double length_scale_;  // bounding-box diagonal (m)
+  Gmres gmres_;
+
+  // Work vectors kept between steps (no allocation per step).
+  Eigen::VectorXd r_, r_try_, dx_, x_try_, f_tmp_, v_tmp_;
+};
+
+}  // namespace liver_sim

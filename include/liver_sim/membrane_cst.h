@@ -1,0 +1,51 @@
+// Glisson's capsule: corotational constant-strain-triangle membranes on boundary triangles,
+// plane stress, thickness h, sharing the tetrahedra's nodes. The in-plane rotation comes from
+// the polar decomposition of the 2D deformation gradient, so the result does not depend on the
+// vertex order of a triangle.
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "liver_sim/options.h"
+
+namespace liver_sim {
+
+using Matrix9d = Eigen::Matrix<double, 9, 9>;
+using Vector9d = Eigen::Matrix<double, 9, 1>;
+
+class MembraneCST {
+ public:
+  // X: rest positions (#V x 3, m); F: triangles (#F x 3).
+  MembraneCST(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& F, const CapsuleOptions& material);
+
+  // Rescales the stiffness for a new E, h, nu (no geometry is recomputed).
+  void set_material(const CapsuleOptions& material);
+
+  // Updates the in-plane frame of every triangle from current positions x (3 #V).
+  void update_rotations(const Eigen::VectorXd& x);
+  void element_force(int e, const Eigen::VectorXd& x, Vector9d& f) const;
+  void element_tangent(int e, Matrix9d& K) const;
+
+  // Small-strain corotated in-plane strain, sym(R^T F) - I (2x2) of triangle e, for tests.
+  Eigen::Matrix2d corotated_strain(int e, const Eigen::VectorXd& x) const;
+
+  int size() const { return static_cast<int>(F_.rows()); }
+  const Eigen::MatrixX3i& triangles() const { return F_; }
+  double area(int e) const { return area_[e]; }
+
+ private:
+  // Current frame: columns are the two in-plane axes, rotated so that rest 2D coordinates map
+  // onto the current triangle (3x2).
+  Eigen::Matrix<double, 3, 2> current_frame(int e, const Eigen::VectorXd& x) const;
+
+  Eigen::MatrixX3i F_;
+  std::vector<Eigen::Matrix<double, 3, 2>> p_;     // rest 2D coordinates (rows)
+  std::vector<Eigen::Matrix2d> Pm_inv_;            // inverse rest 2D edge matrix
+  std::vector<Eigen::Matrix<double, 3, 2>> grad_N_;
+  std::vector<double> area_;
+  std::vector<Eigen::Matrix<double, 6, 6>> K2_;    // in-plane stiffness, 2D local frame
+  std::vector<Eigen::Matrix<double, 3, 2>> frame_; // from the last update_rotations
+};
+
+}  // namespace liver_sim

@@ -1,0 +1,117 @@
+#!/usr/bin/env python3
+"""The reference aspiration test, with and without Glisson's capsule.
+
+Runs the `simulate` tool on config/scenes/aspiration_cube.yaml and draws
+  doc/aspiration_profile.png  top-surface profile along the mid cut y = 7.5 mm (static)
+  doc/aspiration_time.png     centre displacement against time (dynamic, suction applied at t = 0)
+and prints a JSON summary (centre displacements, their ratio, solver statistics).
+
+usage: scripts/aspiration_figures.py [--simulate PATH] [--out DIR] [--steps N] [--dt S]
+(run scripts/run.sh or scripts/test.sh once first so that the simulator is built)
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import xml.etree.ElementTree as ET
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCENE = os.path.join(REPO, "config", "scenes", "aspiration_cube.yaml")
+
+
+def run(simulate, sets, extra):
+    cmd = [simulate, "--scene", SCENE, "--quiet"] + extra
+    for s in sets:
+        cmd += ["--set", s]
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True)
+    return json.loads(out.stdout)
+
+
+def read_vtu(path):
+    root = ET.parse(path).getroot()
+    arrays = {}
+    for da in root.iter("DataArray"):
+        arrays[da.get("Name") or "points"] = np.array(da.text.split(), dtype=float)
+    return arrays["points"].reshape(-1, 3), arrays["displacement"].reshape(-1, 3)
+
+
+def mid_cut_profile(points, disp, size=0.015):
+    top = np.abs(points[:, 2] - size) < 1e-9
+    cut = top & (np.abs(points[:, 1] - size / 2) < 1e-9)
+    order = np.argsort(points[cut, 0])
+    return points[cut, 0][order], disp[cut, 2][order]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--simulate", default=os.path.join(REPO, "build/ws/devel/lib/liver_sim/simulate"))
+    ap.add_argument("--out", default=os.path.join(REPO, "doc"))
+    ap.add_argument("--steps", type=int, default=200, help="dynamic time steps")
+    ap.add_argument("--dt", type=float, default=0.005, help="dynamic time step (s)")
+    args = ap.parse_args()
+    if not os.path.exists(args.simulate):
+        sys.exit(f"{args.simulate} not found: build first (scripts/run.sh)")
+    os.makedirs(args.out, exist_ok=True)
+
+    cases = {"with capsule": "true", "without capsule": "false"}
+    summary, profiles, histories = {}, {}, {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, enabled in cases.items():
+            vtu = os.path.join(tmp, "static.vtu")
+            print(f"static, {label} ...", file=sys.stderr)
+            res = run(args.simulate, [f"capsule.enabled={enabled}"], ["--vtu", vtu])
+            profiles[label] = mid_cut_profile(*read_vtu(vtu))
+            csv = os.path.join(tmp, "dynamic.csv")
+            print(f"dynamic, {label}: {args.steps} steps of {args.dt} s ...", file=sys.stderr)
+            dyn = run(args.simulate, [f"capsule.enabled={enabled}", "solver.mode=dynamic",
+                                      f"solver.steps={args.steps}", f"solver.dt={args.dt}"], ["--csv", csv])
+            data = np.genfromtxt(csv, delimiter=",", names=True)
+            histories[label] = (np.concatenate([[0.0], data["time"]]),
+                                np.concatenate([[0.0], data["centre_uz"]]))
+            summary[label] = {
+                "centre_displacement_mm": 1e3 * res["probes"]["centre"]["displacement"][2],
+                "newton_iterations": res["newton_iterations"]["total"],
+                "step_time_ms": res["step_time_ms"]["median"],
+                "phase_time_ms": res["phase_time_ms_per_step"],
+                "dynamic_final_centre_mm": 1e3 * dyn["probes"]["centre"]["displacement"][2],
+                "dynamic_step_time_ms": dyn["step_time_ms"],
+            }
+    summary["ratio_without_over_with"] = (summary["without capsule"]["centre_displacement_mm"] /
+                                          summary["with capsule"]["centre_displacement_mm"])
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for label, (x, uz) in profiles.items():
+        ax.plot(1e3 * x, 1e3 * uz, marker="o", label=label)
+    ax.axvspan(2.5, 12.5, color="0.9", label="tube lumen (10 mm)")
+    ax.set_xlabel("x along the mid cut y = 7.5 mm (mm)")
+    ax.set_ylabel("vertical displacement of the top face (mm)")
+    ax.set_title(f"Aspiration at -3 kPa: ratio {summary['ratio_without_over_with']:.2f}")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(os.path.join(args.out, "aspiration_profile.png"), dpi=100)
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for label, (t, uz) in histories.items():
+        ax.plot(t, 1e3 * uz, label=label)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("centre node displacement (mm)")
+    ax.set_title(f"Suction applied at t = 0, backward Euler, dt = {args.dt * 1e3:g} ms")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(os.path.join(args.out, "aspiration_time.png"), dpi=100)
+
+    print(json.dumps(summary, indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,37 @@
+# Shared by scripts/run.sh and scripts/test.sh: install missing Debian packages, create or reuse
+# the catkin workspace build/ws (the package is linked into its src), build in Release.
+set -euo pipefail
+
+REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+WS="$REPO/build/ws"
+# Debian's ROS Python modules are invisible to a pyenv or venv python3 earlier on PATH.
+export PATH="/usr/bin:/bin:/usr/sbin:/sbin:$PATH"
+export ROS_HOME="$WS/ros_home" ROS_LOG_DIR="$WS/ros_home/log" ROS_IP=127.0.0.1
+
+PACKAGES=(
+  build-essential cmake catkin libroscpp-dev
+  libeigen3-dev libsuitesparse-dev libopenblas0-pthread libyaml-cpp-dev
+  libgtest-dev python3-matplotlib python3-numpy
+)
+
+install_missing_packages() {
+  local missing=()
+  for p in "${PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  [ ${#missing[@]} -eq 0 ] && return 0
+  echo "liver_sim: installing ${missing[*]}" >&2
+  local sudo=""
+  [ "$(id -u)" -ne 0 ] && sudo="sudo"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y --no-install-recommends "${missing[@]}"
+}
+
+build_workspace() {
+  mkdir -p "$WS/src" "$ROS_LOG_DIR"
+  [ -L "$WS/src/liver_sim" ] || ln -s ../../.. "$WS/src/liver_sim"
+  # Python test nodes need this path in the cached PYTHONPATH of the first configure.
+  mkdir -p "$WS/devel/lib/python3/dist-packages"
+  (cd "$WS" && catkin_make -j2 -DCMAKE_BUILD_TYPE=Release \
+      -DPYTHON_EXECUTABLE=/usr/bin/python3 -DPython3_EXECUTABLE=/usr/bin/python3 "$@")
+}

@@ -1,0 +1,80 @@
+#include "liver_sim/cholmod_solver.h"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace liver_sim {
+
+CholmodSolver::CholmodSolver() {
+  cholmod_start(&common_);
+  common_.supernodal = CHOLMOD_AUTO;
+  // LL^T also in the simplicial case, so that an indefinite matrix is reported, not factored.
+  common_.final_ll = 1;
+  // A non-positive-definite matrix is an expected outcome here (reported by factorize), not
+  // something for CHOLMOD to print.
+  common_.print = 0;
+  common_.error_handler = nullptr;
+}
+
+CholmodSolver::~CholmodSolver() {
+  cholmod_free_dense(&x_, &common_);
+  cholmod_free_dense(&Y_, &common_);
+  cholmod_free_dense(&E_, &common_);
+  cholmod_free_factor(&factor_, &common_);
+  cholmod_finish(&common_);
+}
+
+void CholmodSolver::analyze(int n, const std::vector<int>& column_start,
+                            const std::vector<int>& row_index) {
+  cholmod_free_factor(&factor_, &common_);
+  factorized_ = false;
+  A_ = cholmod_sparse{};
+  A_.nrow = A_.ncol = static_cast<size_t>(n);
+  A_.nzmax = row_index.size();
+  A_.p = const_cast<int*>(column_start.data());
+  A_.i = const_cast<int*>(row_index.data());
+  A_.x = nullptr;
+  A_.stype = 1;  // upper triangle stored
+  A_.itype = CHOLMOD_INT;
+  A_.xtype = CHOLMOD_PATTERN;
+  A_.dtype = CHOLMOD_DOUBLE;
+  A_.sorted = 1;
+  A_.packed = 1;
+  factor_ = cholmod_analyze(&A_, &common_);
+  ++analyses_;
+  if (!factor_ || common_.status < CHOLMOD_OK)
+    throw std::runtime_error("CHOLMOD analysis failed (status " + std::to_string(common_.status) + ")");
+}
+
+bool CholmodSolver::factorize(const std::vector<double>& values) {
+  if (!factor_) throw std::logic_error("CholmodSolver::factorize before analyze");
+  factorized_ = false;
+  for (double v : values)
+    if (!std::isfinite(v)) return false;
+  A_.x = const_cast<double*>(values.data());
+  A_.xtype = CHOLMOD_REAL;
+  const int ok = cholmod_factorize(&A_, factor_, &common_);
+  ++factorizations_;
+  A_.x = nullptr;
+  A_.xtype = CHOLMOD_PATTERN;
+  factorized_ = ok && common_.status == CHOLMOD_OK && factor_->minor == factor_->n;
+  return factorized_;
+}
+
+void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) {
+  if (!factorized_) throw std::logic_error("CholmodSolver::solve without a valid factor");
+  cholmod_dense B{};
+  B.nrow = factor_->n;
+  B.ncol = 1;
+  B.nzmax = B.nrow;
+  B.d = B.nrow;
+  B.x = const_cast<double*>(b.data());
+  B.xtype = CHOLMOD_REAL;
+  B.dtype = CHOLMOD_DOUBLE;
+  cholmod_solve2(CHOLMOD_A, factor_, &B, nullptr, &x_, nullptr, &Y_, &E_, &common_);
+  x = Eigen::Map<const Eigen::VectorXd>(static_cast<double*>(x_->x), b.size());
+}
+
+double CholmodSolver::factor_nonzeros() const { return common_.lnz; }
+
+}  // namespace liver_sim

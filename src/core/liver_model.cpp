@@ -1,0 +1,435 @@
+#include "liver_sim/liver_model.h"
+
+#include <Eigen/Geometry>
+#include <Eigen/LU>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace liver_sim {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr int kMaxKrylov = 30;  // GMRES iterations per Newton step
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+void require_valid(const std::string& message) {
+  if (!message.empty()) throw std::invalid_argument(message);
+}
+
+TetMesh validated(TetMesh mesh) {
+  validate_mesh(mesh, "mesh");
+  return mesh;
+}
+
+const Scene& validated(const Scene& scene) {
+  require_valid(validate(scene.parenchyma));
+  require_valid(validate(scene.capsule));
+  require_valid(validate(scene.solver));
+  return scene;
+}
+
+Eigen::VectorXd flatten(const Eigen::MatrixX3d& V) {
+  Eigen::VectorXd x(3 * V.rows());
+  for (int i = 0; i < V.rows(); ++i) x.segment<3>(3 * i) = V.row(i).transpose();
+  return x;
+}
+
+double free_norm(const Eigen::VectorXd& r, const std::vector<char>& fixed) {
+  double s = 0;
+  for (int i = 0; i < r.size(); ++i)
+    if (!fixed[i]) s += r[i] * r[i];
+  return std::sqrt(s);
+}
+
+}  // namespace
+
+TetMesh load_scene_mesh(const Scene& scene) {
+  if (scene.mesh.file.empty()) return make_box_mesh(scene.mesh.box_size, scene.mesh.box_divisions);
+  return read_mesh(scene.mesh.file, scene.mesh.scale);
+}
+
+LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
+    : mesh_(validated(std::move(mesh))),
+      boundary_(boundary_triangles(mesh_.T)),
+      solver_(validated(scene).solver),
+      parenchyma_(scene.parenchyma),
+      capsule_(scene.capsule),
+      tetra_(mesh_.V, mesh_.T, parenchyma_),
+      membrane_(mesh_.V, boundary_, capsule_),
+      pattern_(static_cast<int>(mesh_.V.rows()), mesh_.T) {
+  const int n = static_cast<int>(mesh_.V.rows());
+  on_boundary_.assign(n, 0);
+  for (int f = 0; f < boundary_.rows(); ++f)
+    for (int k = 0; k < 3; ++k) on_boundary_[boundary_(f, k)] = 1;
+
+  tet_map_.reserve(144 * mesh_.T.rows());
+  for (int e = 0; e < mesh_.T.rows(); ++e) {
+    const int nodes[4] = {mesh_.T(e, 0), mesh_.T(e, 1), mesh_.T(e, 2), mesh_.T(e, 3)};
+    pattern_.append_scatter_map(nodes, 4, tet_map_);
+  }
+  tri_map_.reserve(81 * boundary_.rows());
+  for (int f = 0; f < boundary_.rows(); ++f) {
+    const int nodes[3] = {boundary_(f, 0), boundary_(f, 1), boundary_(f, 2)};
+    pattern_.append_scatter_map(nodes, 3, tri_map_);
+  }
+  stiffness_.assign(pattern_.nonzeros(), 0.0);
+  damping_stiffness_.assign(pattern_.nonzeros(), 0.0);
+  system_.assign(pattern_.nonzeros(), 0.0);
+  solver_cholmod_.analyze(pattern_.rows(), pattern_.column_start(), pattern_.row_index());
+
+  X_ = flatten(mesh_.V);
+  x_ = X_;
+  v_ = Eigen::VectorXd::Zero(3 * n);
+  x_start_ = X_;
+  mass_ = Eigen::VectorXd::Zero(3 * n);
+  for (int e = 0; e < mesh_.T.rows(); ++e)
+    for (int k = 0; k < 4; ++k)
+      mass_.segment<3>(3 * mesh_.T(e, k)).array() += parenchyma_.density * tetra_.volume(e) / 4;
+
+  const Eigen::Vector3d extent = mesh_.V.colwise().maxCoeff() - mesh_.V.colwise().minCoeff();
+  length_scale_ = extent.norm();
+  force_floor_ = 1e-12 * parenchyma_.young_modulus * extent.squaredNorm();
+
+  require_valid(set_capsule(capsule_));
+
+  std::vector<int> fixed_nodes;
+  for (size_t i = 0; i < scene.fixed.size(); ++i) {
+    const std::vector<int> s = select_nodes(scene.fixed[i], "fixed." + std::to_string(i));
+    fixed_nodes.insert(fixed_nodes.end(), s.begin(), s.end());
+  }
+  if (fixed_nodes.empty() && solver_.mode == SolverOptions::Mode::Static)
+    throw std::invalid_argument("fixed: a static scene needs fixed nodes (the stiffness matrix is singular otherwise)");
+  set_fixed(fixed_nodes);
+
+  for (size_t i = 0; i < scene.loads.size(); ++i) {
+    const LoadOptions& load = scene.loads[i];
+    const std::string what = "loads." + std::to_string(i);
+    if (load.region) require_valid(validate(*load.region));
+    switch (load.kind) {
+      case LoadOptions::Kind::Pressure: {
+        if (!std::isfinite(load.pressure)) throw std::invalid_argument(what + ".value must be finite");
+        PressureLoad p{load.pressure, {}};
+        if (load.region) {
+          p.triangles = select_triangles(*load.region, what + ".region");
+        } else {
+          p.triangles.resize(boundary_.rows());
+          for (int f = 0; f < boundary_.rows(); ++f) p.triangles[f] = f;
+        }
+        pressures_.push_back(std::move(p));
+        break;
+      }
+      case LoadOptions::Kind::Gravity: {
+        if (!load.vector.allFinite()) throw std::invalid_argument(what + ".acceleration must be finite");
+        // Lumped masses differ per node, so gravity is one nodal load per node.
+        for (int node = 0; node < n; ++node)
+          nodal_loads_.push_back({mass_[3 * node] * load.vector, {node}});
+        break;
+      }
+      case LoadOptions::Kind::Force: {
+        if (!load.vector.allFinite()) throw std::invalid_argument(what + ".total must be finite");
+        if (!load.region) throw std::invalid_argument(what + ".region is required for a force");
+        std::vector<int> nodes = select_nodes(*load.region, what + ".region");
+        nodal_loads_.push_back({load.vector / static_cast<double>(nodes.size()), std::move(nodes)});
+        break;
+      }
+    }
+  }
+
+  // Probes: the tetrahedron that contains the point best (largest smallest barycentric weight).
+  for (const ProbeOptions& p : scene.probes) {
+    if (!p.point.allFinite()) throw std::invalid_argument("probe '" + p.name + "': point must be finite");
+    Probe best{p.name, -1, Eigen::Vector4d::Zero()};
+    double best_min = -std::numeric_limits<double>::infinity();
+    for (int e = 0; e < mesh_.T.rows(); ++e) {
+      Eigen::Matrix3d Dm;
+      const Eigen::Vector3d X0 = mesh_.V.row(mesh_.T(e, 0)).transpose();
+      for (int k = 0; k < 3; ++k) Dm.col(k) = mesh_.V.row(mesh_.T(e, k + 1)).transpose() - X0;
+      const Eigen::Vector3d w = Dm.inverse() * (p.point - X0);
+      const Eigen::Vector4d b(1 - w.sum(), w[0], w[1], w[2]);
+      if (b.minCoeff() > best_min) {
+        best_min = b.minCoeff();
+        best.tet = e;
+        best.barycentric = b;
+      }
+    }
+    // Points on a curved surface may sit a little outside the faceted mesh.
+    if (best_min < -0.05)
+      throw std::invalid_argument("probe '" + p.name + "' lies outside the mesh");
+    probes_.push_back(best);
+  }
+
+  const int dofs = 3 * n;
+  for (Eigen::VectorXd* v : {&r_, &r_try_, &dx_, &x_try_, &f_tmp_, &v_tmp_}) v->setZero(dofs);
+}
+
+std::vector<int> LiverModel::select_nodes(const Region& r, const std::string& what) const {
+  require_valid(validate(r));
+  std::vector<int> nodes;
+  for (int i = 0; i < mesh_.V.rows(); ++i)
+    if ((!r.boundary_only() || on_boundary_[i]) && r.contains(mesh_.V.row(i).transpose()))
+      nodes.push_back(i);
+  if (nodes.empty()) throw std::invalid_argument(what + ": the region selects no node");
+  return nodes;
+}
+
+std::vector<int> LiverModel::select_triangles(const Region& r, const std::string& what) const {
+  require_valid(validate(r));
+  std::vector<int> triangles;
+  for (int f = 0; f < boundary_.rows(); ++f) {
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 3; ++k) c += mesh_.V.row(boundary_(f, k)).transpose() / 3.0;
+    if (r.contains(c)) triangles.push_back(f);
+  }
+  if (triangles.empty()) throw std::invalid_argument(what + ": the region selects no boundary triangle");
+  return triangles;
+}
+
+void LiverModel::set_fixed(const std::vector<int>& nodes) {
+  fixed_dof_.assign(3 * mesh_.V.rows(), 0);
+  for (int node : nodes)
+    for (int c = 0; c < 3; ++c) fixed_dof_[3 * node + c] = 1;
+  fixed_entries_.clear();
+  const auto& start = pattern_.column_start();
+  const auto& rows = pattern_.row_index();
+  for (int col = 0; col < pattern_.rows(); ++col)
+    for (int k = start[col]; k < start[col + 1]; ++k)
+      if (rows[k] != col && (fixed_dof_[col] || fixed_dof_[rows[k]])) fixed_entries_.push_back(k);
+}
+
+std::string LiverModel::set_capsule(const CapsuleOptions& capsule) {
+  const std::string error = validate(capsule);
+  if (!error.empty()) return error;
+  std::vector<int> active;
+  if (capsule.region) {
+    try {
+      active = select_triangles(*capsule.region, "capsule.region");
+    } catch (const std::invalid_argument& e) {
+      return e.what();
+    }
+  } else {
+    active.resize(boundary_.rows());
+    for (int f = 0; f < boundary_.rows(); ++f) active[f] = f;
+  }
+  membrane_.set_material(capsule);
+  capsule_active_ = std::move(active);
+  capsule_ = capsule;
+  return "";
+}
+
+int LiverModel::capsule_triangles() const {
+  return capsule_.enabled ? static_cast<int>(capsule_active_.size()) : 0;
+}
+
+void LiverModel::reset() {
+  x_ = X_;
+  v_.setZero();
+  x_start_ = X_;
+  time_ = 0;
+}
+
+Eigen::Vector3d LiverModel::probe_displacement(int i) const {
+  const Probe& p = probes_[i];
+  Eigen::Vector3d u = Eigen::Vector3d::Zero();
+  for (int k = 0; k < 4; ++k) {
+    const int node = mesh_.T(p.tet, k);
+    u += p.barycentric[k] * (x_.segment<3>(3 * node) - X_.segment<3>(3 * node));
+  }
+  return u;
+}
+
+void LiverModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
+  f.setZero(x.size());
+  tetra_.update_rotations(x);
+  Vector12d fe;
+  for (int e = 0; e < tetra_.size(); ++e) {
+    tetra_.element_force(e, x, fe);
+    for (int k = 0; k < 4; ++k) f.segment<3>(3 * mesh_.T(e, k)) += fe.segment<3>(3 * k);
+  }
+  if (!capsule_.enabled) return;
+  membrane_.update_rotations(x);
+  Vector9d fm;
+  for (int t : capsule_active_) {
+    membrane_.element_force(t, x, fm);
+    for (int k = 0; k < 3; ++k) f.segment<3>(3 * boundary_(t, k)) += fm.segment<3>(3 * k);
+  }
+}
+
+void LiverModel::external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
+  f.setZero(x.size());
+  for (const PressureLoad& p : pressures_) {
+    for (int t : p.triangles) {
+      const int a = boundary_(t, 0), b = boundary_(t, 1), c = boundary_(t, 2);
+      // Follower load: -p times the current outward area vector, a third to each node.
+      const Eigen::Vector3d area = 0.5 * (x.segment<3>(3 * b) - x.segment<3>(3 * a))
+                                             .cross(x.segment<3>(3 * c) - x.segment<3>(3 * a));
+      const Eigen::Vector3d fn = -p.pressure * area / 3.0;
+      f.segment<3>(3 * a) += fn;
+      f.segment<3>(3 * b) += fn;
+      f.segment<3>(3 * c) += fn;
+    }
+  }
+  for (const NodalLoad& l : nodal_loads_)
+    for (int node : l.nodes) f.segment<3>(3 * node) += l.force;
+}
+
+double LiverModel::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference) {
+  internal_forces(x, f_tmp_);
+  external_forces(x, r);
+  r *= load_scale_;
+  const double load_norm = free_norm(r, fixed_dof_);
+  const double internal_norm = free_norm(f_tmp_, fixed_dof_);
+  r -= f_tmp_;
+  if (solver_.mode == SolverOptions::Mode::Dynamic) {
+    const double dt = solver_.dt;
+    // Backward Euler: M (v - v_n)/dt + D v = f_ext - f_int, v = (x - x_n)/dt, D = a M + b K.
+    v_tmp_ = (x - x_start_) / dt;
+    r -= mass_.cwiseProduct((v_tmp_ - v_) / dt + solver_.rayleigh_mass * v_tmp_);
+    if (solver_.rayleigh_stiffness > 0) {
+      pattern_.multiply(damping_stiffness_, v_tmp_, f_tmp_);
+      r -= solver_.rayleigh_stiffness * f_tmp_;
+    }
+  }
+  for (int i = 0; i < r.size(); ++i)
+    if (fixed_dof_[i]) r[i] = 0;
+  *reference = std::max({load_norm, internal_norm, force_floor_});
+  return r.norm();
+}
+
+void LiverModel::assemble_system() {
+  std::fill(stiffness_.begin(), stiffness_.end(), 0.0);
+  Matrix12d Ke;
+  for (int e = 0; e < tetra_.size(); ++e) {
+    tetra_.element_tangent(e, Ke);
+    scatter_add(Ke, &tet_map_[144 * e], stiffness_);
+  }
+  if (capsule_.enabled) {
+    Matrix9d Km;
+    for (int t : capsule_active_) {
+      membrane_.element_tangent(t, Km);
+      scatter_add(Km, &tri_map_[81 * t], stiffness_);
+    }
+  }
+  // Static: A = K. Dynamic: A = (1 + b/dt) K + (1/dt^2 + a/dt) M.
+  double k_scale = 1.0, m_scale = 0.0;
+  if (solver_.mode == SolverOptions::Mode::Dynamic) {
+    const double dt = solver_.dt;
+    k_scale = 1.0 + solver_.rayleigh_stiffness / dt;
+    m_scale = 1.0 / (dt * dt) + solver_.rayleigh_mass / dt;
+  }
+  for (size_t k = 0; k < stiffness_.size(); ++k) system_[k] = k_scale * stiffness_[k];
+  for (int i = 0; i < pattern_.rows(); ++i) {
+    system_[pattern_.diagonal(i)] += m_scale * mass_[i];
+    if (fixed_dof_[i]) system_[pattern_.diagonal(i)] = 1.0;
+  }
+  for (int k : fixed_entries_) system_[k] = 0.0;
+}
+
+StepResult LiverModel::step() {
+  const auto t_step = Clock::now();
+  StepResult result;
+  x_start_ = x_;  // the last good state, restored if the step diverges
+  auto fail = [&](const std::string& why) {
+    x_ = x_start_;
+    result.status = StepResult::Status::Diverged;
+    result.message = why;
+  };
+
+  auto t0 = Clock::now();
+  double reference = 0;
+  double norm = residual(x_, r_, &reference);
+  result.timing.assembly_ms += ms_since(t0);
+  result.status = StepResult::Status::NotConverged;
+  while (true) {
+    if (!std::isfinite(norm)) {
+      fail("non-finite residual");
+      break;
+    }
+    result.residual = norm / reference;
+    if (norm <= solver_.tolerance * reference) {
+      result.status = StepResult::Status::Converged;
+      break;
+    }
+    if (result.iterations == solver_.max_iterations) {
+      result.message = "iteration cap reached";
+      break;
+    }
+    ++result.iterations;
+    t0 = Clock::now();
+    assemble_system();
+    // Rayleigh damping uses the stiffness at the start of the step, fixed within the step, so
+    // that the residual stays one function of x while Newton iterates. (v = 0 there, so the
+    // residual already computed is unchanged.)
+    if (result.iterations == 1 && solver_.rayleigh_stiffness > 0) damping_stiffness_ = stiffness_;
+    result.timing.assembly_ms += ms_since(t0);
+    t0 = Clock::now();
+    const bool factored = solver_cholmod_.factorize(system_);
+    result.timing.factorization_ms += ms_since(t0);
+    if (!factored) {
+      fail("tangent matrix is not positive definite");
+      break;
+    }
+    // Newton-Krylov: GMRES on the true Jacobian (directional differences of the residual),
+    // preconditioned by the factorised corotational tangent. The tangent alone misses the
+    // rotation derivative and the follower-load stiffness, which under suction on soft tissue
+    // are as large as the material stiffness and make a plain modified Newton crawl.
+    t0 = Clock::now();
+    // A factorisation costs far more than a GMRES iteration: solve each linearisation well.
+    const double forcing = std::max(1e-6, 0.1 * solver_.tolerance * reference / norm);
+    const Gmres::Operator jacobian = [&](const Eigen::VectorXd& v, Eigen::VectorXd& out) {
+      const double h = 1e-8 * length_scale_ / std::max(v.cwiseAbs().maxCoeff(), 1e-300);
+      x_try_ = x_ + h * v;
+      double unused;
+      residual(x_try_, out, &unused);
+      out = (r_ - out) / h;
+    };
+    const Gmres::Operator preconditioner = [&](const Eigen::VectorXd& in, Eigen::VectorXd& out) {
+      solver_cholmod_.solve(in, out);
+    };
+    result.linear_iterations += gmres_.solve(jacobian, preconditioner, r_, dx_, forcing, kMaxKrylov);
+    result.timing.solve_ms += ms_since(t0);
+    if (!dx_.allFinite()) {
+      fail("non-finite Newton update");
+      break;
+    }
+
+    // Backtracking on the residual norm guards far from the solution.
+    t0 = Clock::now();
+    double alpha = 1.0, best_alpha = 1.0, best_norm = std::numeric_limits<double>::infinity();
+    double ref_try = reference;
+    const int max_halvings = solver_.line_search ? 6 : 0;
+    for (int h = 0;; ++h) {
+      x_try_ = x_ + alpha * dx_;
+      const double n_try = residual(x_try_, r_try_, &ref_try);
+      if (n_try < best_norm) {
+        best_norm = n_try;
+        best_alpha = alpha;
+      }
+      if (n_try <= (1.0 - 1e-4 * alpha) * norm || h == max_halvings) break;
+      alpha *= 0.5;
+    }
+    // None was good enough: take the best one tried.
+    if (best_alpha != alpha) {
+      x_try_ = x_ + best_alpha * dx_;
+      best_norm = residual(x_try_, r_try_, &ref_try);
+    }
+    result.timing.assembly_ms += ms_since(t0);
+    x_.swap(x_try_);
+    r_.swap(r_try_);
+    norm = best_norm;
+    reference = ref_try;
+  }
+  if (result.status != StepResult::Status::Diverged &&
+      solver_.mode == SolverOptions::Mode::Dynamic) {
+    v_ = (x_ - x_start_) / solver_.dt;
+    time_ += solver_.dt;
+  }
+  result.timing.total_ms = ms_since(t_step);
+  return result;
+}
+
+}  // namespace liver_sim

@@ -1,0 +1,114 @@
+#include "liver_sim/membrane_cst.h"
+
+#include <Eigen/Geometry>
+#include <Eigen/LU>
+#include <cmath>
+
+namespace liver_sim {
+namespace {
+
+Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
+
+// Two orthonormal in-plane axes (columns): the first edge and its normal in the plane.
+Eigen::Matrix<double, 3, 2> plane_axes(const Eigen::Vector3d& e01, const Eigen::Vector3d& e02) {
+  const Eigen::Vector3d a = e01.normalized();
+  const Eigen::Vector3d n = e01.cross(e02).normalized();
+  Eigen::Matrix<double, 3, 2> axes;
+  axes << a, n.cross(a);
+  return axes;
+}
+
+}  // namespace
+
+MembraneCST::MembraneCST(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& F,
+                         const CapsuleOptions& material)
+    : F_(F) {
+  const int n = static_cast<int>(F.rows());
+  p_.resize(n);
+  Pm_inv_.resize(n);
+  grad_N_.resize(n);
+  area_.resize(n);
+  frame_.resize(n);
+  for (int e = 0; e < n; ++e) {
+    const Eigen::Vector3d X0 = X.row(F(e, 0)).transpose();
+    const Eigen::Vector3d e01 = X.row(F(e, 1)).transpose() - X0;
+    const Eigen::Vector3d e02 = X.row(F(e, 2)).transpose() - X0;
+    const Eigen::Matrix<double, 3, 2> axes = plane_axes(e01, e02);
+    frame_[e] = axes;
+    for (int i = 0; i < 3; ++i)
+      p_[e].row(i) = (axes.transpose() * (X.row(F(e, i)).transpose() - X0)).transpose();
+    Eigen::Matrix2d Pm;
+    Pm << (p_[e].row(1) - p_[e].row(0)).transpose(), (p_[e].row(2) - p_[e].row(0)).transpose();
+    area_[e] = 0.5 * Pm.determinant();
+    Pm_inv_[e] = Pm.inverse();
+    grad_N_[e].bottomRows<2>() = Pm_inv_[e];
+    grad_N_[e].row(0) = -Pm_inv_[e].colwise().sum();
+  }
+  set_material(material);
+}
+
+void MembraneCST::set_material(const CapsuleOptions& material) {
+  const double E = material.young_modulus, nu = material.poisson_ratio, h = material.thickness;
+  // Plane stress: sigma = lambda* tr(eps) I + 2 mu eps, lambda* = E nu / (1 - nu^2).
+  const double lambda = E * nu / (1 - nu * nu);
+  const double mu = E / (2 * (1 + nu));
+  K2_.resize(area_.size());
+  for (size_t e = 0; e < area_.size(); ++e) {
+    for (int a = 0; a < 3; ++a) {
+      const Eigen::Vector2d ga = grad_N_[e].row(a).transpose();
+      for (int b = 0; b < 3; ++b) {
+        const Eigen::Vector2d gb = grad_N_[e].row(b).transpose();
+        K2_[e].block<2, 2>(2 * a, 2 * b) =
+            h * area_[e] * (lambda * ga * gb.transpose() + mu * gb * ga.transpose() +
+                            mu * ga.dot(gb) * Eigen::Matrix2d::Identity());
+      }
+    }
+  }
+}
+
+Eigen::Matrix<double, 3, 2> MembraneCST::current_frame(int e, const Eigen::VectorXd& x) const {
+  const Eigen::Vector3d x0 = node(x, F_(e, 0));
+  const Eigen::Matrix<double, 3, 2> axes =
+      plane_axes(node(x, F_(e, 1)) - x0, node(x, F_(e, 2)) - x0);
+  // In-plane deformation gradient in these axes, then its rotation (2D polar decomposition in
+  // closed form) so that the frame follows the triangle, not its first edge.
+  Eigen::Matrix2d Q;
+  Q << axes.transpose() * (node(x, F_(e, 1)) - x0), axes.transpose() * (node(x, F_(e, 2)) - x0);
+  const Eigen::Matrix2d F2 = Q * Pm_inv_[e];
+  const double theta = std::atan2(F2(1, 0) - F2(0, 1), F2(0, 0) + F2(1, 1));
+  Eigen::Matrix2d R2;
+  R2 << std::cos(theta), -std::sin(theta), std::sin(theta), std::cos(theta);
+  return axes * R2;
+}
+
+void MembraneCST::update_rotations(const Eigen::VectorXd& x) {
+  for (int e = 0; e < size(); ++e) frame_[e] = current_frame(e, x);
+}
+
+void MembraneCST::element_force(int e, const Eigen::VectorXd& x, Vector9d& f) const {
+  const Eigen::Matrix<double, 3, 2>& A = frame_[e];
+  const Eigen::Vector3d x0 = node(x, F_(e, 0));
+  Eigen::Matrix<double, 6, 1> u;
+  for (int i = 0; i < 3; ++i)
+    u.segment<2>(2 * i) = A.transpose() * (node(x, F_(e, i)) - x0) - p_[e].row(i).transpose();
+  const Eigen::Matrix<double, 6, 1> f2 = K2_[e] * u;
+  for (int i = 0; i < 3; ++i) f.segment<3>(3 * i) = A * f2.segment<2>(2 * i);
+}
+
+void MembraneCST::element_tangent(int e, Matrix9d& K) const {
+  const Eigen::Matrix<double, 3, 2>& A = frame_[e];
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b)
+      K.block<3, 3>(3 * a, 3 * b).noalias() = A * K2_[e].block<2, 2>(2 * a, 2 * b) * A.transpose();
+}
+
+Eigen::Matrix2d MembraneCST::corotated_strain(int e, const Eigen::VectorXd& x) const {
+  const Eigen::Matrix<double, 3, 2>& A = frame_[e];
+  const Eigen::Vector3d x0 = node(x, F_(e, 0));
+  Eigen::Matrix2d Q;
+  Q << A.transpose() * (node(x, F_(e, 1)) - x0), A.transpose() * (node(x, F_(e, 2)) - x0);
+  const Eigen::Matrix2d G = Q * Pm_inv_[e];
+  return 0.5 * (G + G.transpose()) - Eigen::Matrix2d::Identity();
+}
+
+}  // namespace liver_sim

@@ -1,0 +1,326 @@
+// Element kernels: rigid-motion invariance, patch tests, stiffness against independent
+// formulas, tangent against finite differences.
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <random>
+
+#include "liver_sim/corotational_tetra.h"
+#include "liver_sim/membrane_cst.h"
+#include "liver_sim/mesh.h"
+
+namespace liver_sim {
+namespace {
+
+constexpr double kSize = 0.01;  // m
+constexpr double kE = 5000.0;   // Pa
+
+Eigen::VectorXd flatten(const Eigen::MatrixX3d& V) {
+  Eigen::VectorXd x(3 * V.rows());
+  for (int i = 0; i < V.rows(); ++i) x.segment<3>(3 * i) = V.row(i).transpose();
+  return x;
+}
+
+Eigen::VectorXd transform(const Eigen::VectorXd& x, const Eigen::Matrix3d& Q, const Eigen::Vector3d& t) {
+  Eigen::VectorXd y(x.size());
+  for (int i = 0; i < x.size(); i += 3) y.segment<3>(i) = Q * x.segment<3>(i) + t;
+  return y;
+}
+
+Eigen::VectorXd tet_forces(CorotationalTetra& tets, const Eigen::VectorXd& x) {
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(x.size());
+  tets.update_rotations(x);
+  Vector12d fe;
+  for (int e = 0; e < tets.size(); ++e) {
+    tets.element_force(e, x, fe);
+    for (int k = 0; k < 4; ++k) f.segment<3>(3 * tets.elements()(e, k)) += fe.segment<3>(3 * k);
+  }
+  return f;
+}
+
+Eigen::VectorXd membrane_forces(MembraneCST& m, const Eigen::VectorXd& x) {
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(x.size());
+  m.update_rotations(x);
+  Vector9d fe;
+  for (int e = 0; e < m.size(); ++e) {
+    m.element_force(e, x, fe);
+    for (int k = 0; k < 3; ++k) f.segment<3>(3 * m.triangles()(e, k)) += fe.segment<3>(3 * k);
+  }
+  return f;
+}
+
+Eigen::VectorXd random_field(int n, double amplitude, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-amplitude, amplitude);
+  Eigen::VectorXd d(n);
+  for (int i = 0; i < n; ++i) d[i] = u(rng);
+  return d;
+}
+
+Eigen::Matrix3d some_rotation() {
+  return Eigen::AngleAxisd(1.1, Eigen::Vector3d(0.3, -0.8, 0.5).normalized()).toRotationMatrix();
+}
+
+ParenchymaOptions material(RotationMethod method) {
+  ParenchymaOptions o;
+  o.young_modulus = kE;
+  o.poisson_ratio = 0.45;
+  o.rotation = method;
+  return o;
+}
+
+CapsuleOptions capsule() {
+  CapsuleOptions c;
+  c.enabled = true;
+  c.young_modulus = 8e6;
+  c.thickness = 20e-6;
+  c.poisson_ratio = 0.4;
+  return c;
+}
+
+class TetraRotation : public ::testing::TestWithParam<RotationMethod> {};
+
+TEST_P(TetraRotation, RigidMotionOfDeformedStateRotatesForces) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(3, 3, 3));
+  CorotationalTetra tets(mesh.V, mesh.T, material(GetParam()));
+  const Eigen::VectorXd x = flatten(mesh.V) + random_field(3 * mesh.V.rows(), 0.05 * kSize, 1);
+  const Eigen::VectorXd f = tet_forces(tets, x);
+  const Eigen::Matrix3d Q = some_rotation();
+  const Eigen::VectorXd f_moved = tet_forces(tets, transform(x, Q, Eigen::Vector3d(0.2, -0.1, 0.05)));
+  const Eigen::VectorXd expected = transform(f, Q, Eigen::Vector3d::Zero());
+  ASSERT_GT(f.norm(), 0.0);
+  EXPECT_LE((f_moved - expected).norm(), 1e-9 * f.norm());
+}
+
+TEST_P(TetraRotation, RigidMotionOfRestStateGivesZeroForce) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(3, 3, 3));
+  CorotationalTetra tets(mesh.V, mesh.T, material(GetParam()));
+  const Eigen::VectorXd x = transform(flatten(mesh.V), some_rotation(), Eigen::Vector3d(1.0, 2.0, -0.5));
+  // Force scale: unit strain over one element face, E h^2.
+  const double h = kSize / 3;
+  EXPECT_LE(tet_forces(tets, x).cwiseAbs().maxCoeff(), 1e-9 * kE * h * h);
+}
+
+// Any affine deformation: every element has the same corotated strain and interior nodes are
+// in equilibrium (the polar rotation is exact for every F, not only small ones).
+TEST(TetraPatch, AffineFieldGivesConstantStrainAndZeroInteriorResidual) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(4, 4, 4));
+  CorotationalTetra tets(mesh.V, mesh.T, material(RotationMethod::Polar));
+  Eigen::Matrix3d A;
+  A << 1.2, 0.1, -0.05, 0.03, 0.9, 0.2, -0.1, 0.04, 1.1;
+  const Eigen::Matrix3d F = some_rotation() * A;
+  const Eigen::VectorXd x = transform(flatten(mesh.V), F, Eigen::Vector3d(0.01, 0.0, 0.0));
+  const Eigen::VectorXd f = tet_forces(tets, x);
+  // Polar: R^T F = sqrt(F^T F), so the corotated strain is U - I with U the right stretch.
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const Eigen::Matrix3d expected =
+      svd.matrixV() * svd.singularValues().asDiagonal() * svd.matrixV().transpose() -
+      Eigen::Matrix3d::Identity();
+  for (int e = 0; e < tets.size(); ++e)
+    ASSERT_LE((tets.corotated_strain(e, x) - expected).norm(), 1e-12) << "element " << e;
+  double interior_max = 0;
+  for (int i = 0; i < mesh.V.rows(); ++i) {
+    const Eigen::Vector3d p = mesh.V.row(i);
+    const bool interior = (p.array() > 1e-12).all() && (p.array() < kSize - 1e-12).all();
+    if (interior) interior_max = std::max(interior_max, f.segment<3>(3 * i).norm());
+  }
+  EXPECT_LE(interior_max, 1e-9 * f.cwiseAbs().maxCoeff());
+}
+
+// Small strain, both rotation methods: the strain is the linear strain of the field.
+TEST_P(TetraRotation, SmallAffineFieldGivesLinearStrain) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(3, 3, 3));
+  CorotationalTetra tets(mesh.V, mesh.T, material(GetParam()));
+  Eigen::Matrix3d G;
+  G << 0.3, -0.2, 0.5, 0.1, -0.4, 0.2, 0.7, 0.05, 0.25;
+  const double eps = 1e-6;
+  const Eigen::VectorXd x =
+      transform(flatten(mesh.V), Eigen::Matrix3d::Identity() + eps * G, Eigen::Vector3d::Zero());
+  tets.update_rotations(x);
+  const Eigen::Matrix3d linear = 0.5 * eps * (G + G.transpose());
+  for (int e = 0; e < tets.size(); ++e)
+    ASSERT_LE((tets.corotated_strain(e, x) - linear).norm(), 10 * eps * eps) << "element " << e;
+}
+
+INSTANTIATE_TEST_SUITE_P(BothMethods, TetraRotation,
+                         ::testing::Values(RotationMethod::Geometric, RotationMethod::Polar),
+                         [](const auto& info) {
+                           return info.param == RotationMethod::Polar ? "Polar" : "Geometric";
+                         });
+
+// K0 against V B^T D B with the Voigt strain-displacement matrix, built independently.
+TEST(TetraStiffness, MatchesVoigtFormula) {
+  TetMesh mesh;
+  mesh.V.resize(4, 3);
+  mesh.V << 0, 0, 0, 0.01, 0.001, 0, 0.002, 0.012, 0.001, 0.001, 0.002, 0.009;
+  mesh.T.resize(1, 4);
+  mesh.T << 0, 1, 2, 3;
+  const ParenchymaOptions o = material(RotationMethod::Polar);
+  CorotationalTetra tets(mesh.V, mesh.T, o);
+
+  Eigen::Matrix4d C;  // rows (1, x, y, z) of each node: inverse gives shape-function coefficients
+  for (int i = 0; i < 4; ++i) C.row(i) << 1, mesh.V(i, 0), mesh.V(i, 1), mesh.V(i, 2);
+  const Eigen::Matrix4d coeff = C.inverse();  // column i: N_i = c0 + c1 x + c2 y + c3 z
+  Eigen::Matrix<double, 6, 12> B = Eigen::Matrix<double, 6, 12>::Zero();
+  for (int i = 0; i < 4; ++i) {
+    const double bx = coeff(1, i), by = coeff(2, i), bz = coeff(3, i);
+    B(0, 3 * i) = bx;
+    B(1, 3 * i + 1) = by;
+    B(2, 3 * i + 2) = bz;
+    B(3, 3 * i) = by, B(3, 3 * i + 1) = bx;
+    B(4, 3 * i + 1) = bz, B(4, 3 * i + 2) = by;
+    B(5, 3 * i) = bz, B(5, 3 * i + 2) = bx;
+  }
+  const double E = o.young_modulus, nu = o.poisson_ratio;
+  Eigen::Matrix<double, 6, 6> D = Eigen::Matrix<double, 6, 6>::Zero();
+  D.topLeftCorner<3, 3>().setConstant(nu);
+  D.topLeftCorner<3, 3>().diagonal().setConstant(1 - nu);
+  D.bottomRightCorner<3, 3>().diagonal().setConstant((1 - 2 * nu) / 2);
+  D *= E / ((1 + nu) * (1 - 2 * nu));
+  const double V = std::abs(C.determinant()) / 6;
+  const Matrix12d expected = V * B.transpose() * D * B;
+  EXPECT_LE((tets.rest_stiffness(0) - expected).norm(), 1e-12 * expected.norm());
+}
+
+// Around a rigidly rotated rest state the element is unstressed, so the dropped derivative of R
+// contributes nothing and the tangent R K0 R^T must match finite differences of the force.
+TEST_P(TetraRotation, TangentMatchesFiniteDifferencesAtRotatedRest) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(1, 1, 1));
+  CorotationalTetra tets(mesh.V, mesh.T, material(GetParam()));
+  const Eigen::VectorXd x = transform(flatten(mesh.V), some_rotation(), Eigen::Vector3d::Zero());
+  const Eigen::VectorXd d = random_field(x.size(), 1e-7 * kSize, 7);
+  const Eigen::VectorXd df = tet_forces(tets, x + d) - tet_forces(tets, x - d);
+  tets.update_rotations(x);
+  Eigen::VectorXd Kd = Eigen::VectorXd::Zero(x.size());
+  Matrix12d Ke;
+  for (int e = 0; e < tets.size(); ++e) {
+    tets.element_tangent(e, Ke);
+    Vector12d de;
+    for (int k = 0; k < 4; ++k) de.segment<3>(3 * k) = d.segment<3>(3 * tets.elements()(e, k));
+    const Vector12d fe = 2 * Ke * de;
+    for (int k = 0; k < 4; ++k) Kd.segment<3>(3 * tets.elements()(e, k)) += fe.segment<3>(3 * k);
+  }
+  EXPECT_LE((df - Kd).norm(), 1e-6 * Kd.norm());
+}
+
+// --- CST membrane ---
+
+TEST(MembraneRotation, RigidMotionOfDeformedStateRotatesForces) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(3, 3, 3));
+  MembraneCST m(mesh.V, boundary_triangles(mesh.T), capsule());
+  const Eigen::VectorXd x = flatten(mesh.V) + random_field(3 * mesh.V.rows(), 0.05 * kSize, 3);
+  const Eigen::VectorXd f = membrane_forces(m, x);
+  const Eigen::Matrix3d Q = some_rotation();
+  const Eigen::VectorXd f_moved = membrane_forces(m, transform(x, Q, Eigen::Vector3d(-0.3, 0.1, 0.2)));
+  ASSERT_GT(f.norm(), 0.0);
+  EXPECT_LE((f_moved - transform(f, Q, Eigen::Vector3d::Zero())).norm(), 1e-9 * f.norm());
+}
+
+TEST(MembraneRotation, RigidMotionOfRestStateGivesZeroForce) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(3, 3, 3));
+  const CapsuleOptions c = capsule();
+  MembraneCST m(mesh.V, boundary_triangles(mesh.T), c);
+  const Eigen::VectorXd x = transform(flatten(mesh.V), some_rotation(), Eigen::Vector3d(1.0, 2.0, -0.5));
+  const double h = kSize / 3;  // force scale: unit strain along one edge, E t h
+  EXPECT_LE(membrane_forces(m, x).cwiseAbs().maxCoeff(), 1e-9 * c.young_modulus * c.thickness * h);
+}
+
+// The top face of a box is a planar membrane; an in-plane affine field (then a rigid rotation
+// out of the plane) gives the same strain everywhere and equilibrium at interior face nodes.
+TEST(MembranePatch, InPlaneAffineFieldGivesConstantStrainAndZeroInteriorResidual) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(4, 4, 4));
+  const Eigen::MatrixX3i all = boundary_triangles(mesh.T);
+  std::vector<int> top;
+  for (int f = 0; f < all.rows(); ++f)
+    if (mesh.V(all(f, 0), 2) > kSize - 1e-12 && mesh.V(all(f, 1), 2) > kSize - 1e-12 &&
+        mesh.V(all(f, 2), 2) > kSize - 1e-12)
+      top.push_back(f);
+  ASSERT_EQ(top.size(), 32u);
+  Eigen::MatrixX3i F(top.size(), 3);
+  for (size_t k = 0; k < top.size(); ++k) F.row(k) = all.row(top[k]);
+  MembraneCST m(mesh.V, F, capsule());
+
+  Eigen::Matrix3d A = Eigen::Matrix3d::Identity();
+  A.topLeftCorner<2, 2>() << 1.15, 0.08, -0.05, 0.92;
+  const Eigen::Matrix3d Q = some_rotation();
+  const Eigen::VectorXd x = transform(flatten(mesh.V), Q * A, Eigen::Vector3d(0.0, 0.01, 0.0));
+  const Eigen::VectorXd f = membrane_forces(m, x);
+  const Eigen::JacobiSVD<Eigen::Matrix2d> svd(A.topLeftCorner<2, 2>(), Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const Eigen::Matrix2d stretch =
+      svd.matrixV() * svd.singularValues().asDiagonal() * svd.matrixV().transpose();
+  // Each triangle's strain is in its own local axes: compare invariants (trace, determinant).
+  const Eigen::Matrix2d expected = stretch - Eigen::Matrix2d::Identity();
+  for (int e = 0; e < m.size(); ++e) {
+    const Eigen::Matrix2d s = m.corotated_strain(e, x);
+    ASSERT_NEAR(s.trace(), expected.trace(), 1e-12) << "triangle " << e;
+    ASSERT_NEAR(s.determinant(), expected.determinant(), 1e-12) << "triangle " << e;
+  }
+  double interior_max = 0;
+  for (int i = 0; i < mesh.V.rows(); ++i) {
+    const Eigen::Vector3d p = mesh.V.row(i);
+    if (p.z() > kSize - 1e-12 && p.x() > 1e-12 && p.x() < kSize - 1e-12 && p.y() > 1e-12 &&
+        p.y() < kSize - 1e-12)
+      interior_max = std::max(interior_max, f.segment<3>(3 * i).norm());
+  }
+  ASSERT_GT(f.cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_LE(interior_max, 1e-9 * f.cwiseAbs().maxCoeff());
+}
+
+// The membrane stiffness against K = h A B^T D B with the explicit CST B matrix of the
+// formulation notes, in the triangle's own 2D coordinates.
+TEST(MembraneStiffness, MatchesExplicitCstFormula) {
+  Eigen::MatrixX3d V(3, 3);
+  V << 0.001, 0.002, 0.003, 0.011, 0.004, 0.001, 0.004, 0.010, 0.006;
+  Eigen::MatrixX3i F(1, 3);
+  F << 0, 1, 2;
+  const CapsuleOptions c = capsule();
+  MembraneCST m(V, F, c);
+  m.update_rotations(Eigen::Map<const Eigen::VectorXd>(Eigen::MatrixXd(V.transpose()).data(), 9));
+  Matrix9d K;
+  m.element_tangent(0, K);
+
+  // Local axes: first edge and its in-plane normal.
+  const Eigen::Vector3d e1 = (V.row(1) - V.row(0)).normalized();
+  const Eigen::Vector3d n = (V.row(1) - V.row(0)).cross(V.row(2) - V.row(0)).normalized();
+  const Eigen::Vector3d e2 = n.cross(e1);
+  double x[3], y[3];
+  for (int i = 0; i < 3; ++i) {
+    const Eigen::Vector3d d = (V.row(i) - V.row(0)).transpose();
+    x[i] = e1.dot(d);
+    y[i] = e2.dot(d);
+  }
+  const double area = 0.5 * ((x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]));
+  const double y23 = y[1] - y[2], y31 = y[2] - y[0], y12 = y[0] - y[1];
+  const double x32 = x[2] - x[1], x13 = x[0] - x[2], x21 = x[1] - x[0];
+  Eigen::Matrix<double, 3, 6> B;
+  B << y23, 0, y31, 0, y12, 0, 0, x32, 0, x13, 0, x21, x32, y23, x13, y31, x21, y12;
+  B /= 2 * area;
+  const double E = c.young_modulus, nu = c.poisson_ratio;
+  Eigen::Matrix3d D;
+  D << 1, nu, 0, nu, 1, 0, 0, 0, (1 - nu) / 2;
+  D *= E / (1 - nu * nu);
+  const Eigen::Matrix<double, 6, 6> K2 = c.thickness * area * B.transpose() * D * B;
+  Eigen::Matrix<double, 9, 6> T = Eigen::Matrix<double, 9, 6>::Zero();
+  for (int i = 0; i < 3; ++i) {
+    T.block<3, 1>(3 * i, 2 * i) = e1;
+    T.block<3, 1>(3 * i, 2 * i + 1) = e2;
+  }
+  const Matrix9d expected = T * K2 * T.transpose();
+  EXPECT_LE((K - expected).norm(), 1e-12 * expected.norm());
+}
+
+// Vertex order must not matter for the membrane (its rotation comes from the polar
+// decomposition, not from the first edge).
+TEST(MembraneRotation, ForcesDoNotDependOnVertexOrder) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(2, 2, 2));
+  const Eigen::MatrixX3i F = boundary_triangles(mesh.T);
+  Eigen::MatrixX3i G(F.rows(), 3);
+  for (int f = 0; f < F.rows(); ++f) G.row(f) << F(f, 1), F(f, 2), F(f, 0);  // same orientation
+  MembraneCST a(mesh.V, F, capsule()), b(mesh.V, G, capsule());
+  const Eigen::VectorXd x = flatten(mesh.V) + random_field(3 * mesh.V.rows(), 0.1 * kSize, 5);
+  const Eigen::VectorXd fa = membrane_forces(a, x), fb = membrane_forces(b, x);
+  EXPECT_LE((fa - fb).norm(), 1e-9 * fa.norm());
+}
+
+}  // namespace
+}  // namespace liver_sim

@@ -1,0 +1,134 @@
+// Linear algebra: the sparse pattern and scatter maps, CHOLMOD against a dense factorisation,
+// GMRES on a non-symmetric operator.
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <random>
+
+#include "liver_sim/cholmod_solver.h"
+#include "liver_sim/corotational_tetra.h"
+#include "liver_sim/gmres.h"
+#include "liver_sim/mesh.h"
+#include "liver_sim/sparse_pattern.h"
+
+namespace liver_sim {
+namespace {
+
+// Global stiffness of a small box assembled twice: through the pattern and scatter maps, and
+// densely by plain index arithmetic.
+struct Assembled {
+  TetMesh mesh = make_box_mesh({0.01, 0.01, 0.01}, {2, 2, 2});
+  SparsePattern pattern{static_cast<int>(mesh.V.rows()), mesh.T};
+  std::vector<double> values;
+  Eigen::MatrixXd dense;
+
+  Assembled() {
+    CorotationalTetra tets(mesh.V, mesh.T, ParenchymaOptions{});
+    const int n = pattern.rows();
+    values.assign(pattern.nonzeros(), 0.0);
+    dense.setZero(n, n);
+    std::vector<int> map;
+    for (int e = 0; e < mesh.T.rows(); ++e) {
+      const int nodes[4] = {mesh.T(e, 0), mesh.T(e, 1), mesh.T(e, 2), mesh.T(e, 3)};
+      map.clear();
+      pattern.append_scatter_map(nodes, 4, map);
+      scatter_add(tets.rest_stiffness(e), map.data(), values);
+      for (int a = 0; a < 4; ++a)
+        for (int b = 0; b < 4; ++b)
+          dense.block<3, 3>(3 * nodes[a], 3 * nodes[b]) += tets.rest_stiffness(e).block<3, 3>(3 * a, 3 * b);
+    }
+    // Clamp the bottom face so that the matrix is positive definite.
+    for (int i = 0; i < mesh.V.rows(); ++i) {
+      if (mesh.V(i, 2) > 1e-12) continue;
+      for (int c = 0; c < 3; ++c) {
+        const int d = 3 * i + c;
+        dense.row(d).setZero();
+        dense.col(d).setZero();
+        dense(d, d) = 1;
+        for (int k = 0; k < pattern.rows(); ++k) {
+          const int idx = pattern.find(std::min(k, d), std::max(k, d));
+          if (idx >= 0) values[idx] = (k == d) ? 1.0 : 0.0;
+        }
+      }
+    }
+  }
+};
+
+TEST(SparsePattern, ScatteredAssemblyEqualsDenseAssembly) {
+  Assembled A;
+  Eigen::MatrixXd from_pattern = Eigen::MatrixXd::Zero(A.pattern.rows(), A.pattern.rows());
+  for (int col = 0; col < A.pattern.rows(); ++col)
+    for (int k = A.pattern.column_start()[col]; k < A.pattern.column_start()[col + 1]; ++k) {
+      from_pattern(A.pattern.row_index()[k], col) = A.values[k];
+      from_pattern(col, A.pattern.row_index()[k]) = A.values[k];
+    }
+  EXPECT_LE((from_pattern - A.dense).norm(), 1e-12 * A.dense.norm());
+  // Every structurally coupled pair of nodes is in the pattern, nothing else.
+  int couplings = 0;
+  for (int i = 0; i < A.pattern.rows(); ++i)
+    for (int j = i; j < A.pattern.rows(); ++j) couplings += (A.pattern.find(i, j) >= 0);
+  EXPECT_EQ(couplings, A.pattern.nonzeros());
+}
+
+TEST(SparsePattern, SymmetricProductMatchesDense) {
+  Assembled A;
+  const Eigen::VectorXd x = Eigen::VectorXd::LinSpaced(A.pattern.rows(), -1.0, 2.0);
+  Eigen::VectorXd y;
+  A.pattern.multiply(A.values, x, y);
+  EXPECT_LE((y - A.dense * x).norm(), 1e-12 * (A.dense * x).norm());
+}
+
+TEST(CholmodSolver, SolvesLikeDenseCholeskyAndReusesAnalysis) {
+  Assembled A;
+  CholmodSolver solver;
+  solver.analyze(A.pattern.rows(), A.pattern.column_start(), A.pattern.row_index());
+  const Eigen::VectorXd b = Eigen::VectorXd::LinSpaced(A.pattern.rows(), 1.0, 3.0);
+  for (double scale : {1.0, 2.5}) {  // new values, same pattern: no new analysis
+    std::vector<double> v = A.values;
+    for (double& a : v) a *= scale;
+    ASSERT_TRUE(solver.factorize(v));
+    Eigen::VectorXd x;
+    solver.solve(b, x);
+    const Eigen::VectorXd expected = (scale * A.dense).llt().solve(b);
+    EXPECT_LE((x - expected).norm(), 1e-10 * expected.norm());
+  }
+  EXPECT_EQ(solver.analyses(), 1);
+  EXPECT_EQ(solver.factorizations(), 2);
+}
+
+TEST(CholmodSolver, ReportsIndefiniteAndNonFiniteMatrices) {
+  Assembled A;
+  CholmodSolver solver;
+  solver.analyze(A.pattern.rows(), A.pattern.column_start(), A.pattern.row_index());
+  std::vector<double> v = A.values;
+  for (double& a : v) a = -a;
+  EXPECT_FALSE(solver.factorize(v));
+  EXPECT_FALSE(solver.factorized());
+  v = A.values;
+  v[3] = std::nan("");
+  EXPECT_FALSE(solver.factorize(v));
+  ASSERT_TRUE(solver.factorize(A.values));
+}
+
+TEST(Gmres, SolvesNonSymmetricSystemWithPreconditioner) {
+  const int n = 60;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1, 1);
+  Eigen::MatrixXd M = Eigen::MatrixXd::Identity(n, n) * 4;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) M(i, j) += 0.3 * u(rng);
+  const Eigen::VectorXd b = Eigen::VectorXd::LinSpaced(n, -1, 1);
+  // Preconditioner: the inverse of the symmetric part (like the tangent versus the Jacobian).
+  const Eigen::MatrixXd P = (0.5 * (M + M.transpose())).inverse();
+  Gmres gmres;
+  Eigen::VectorXd x;
+  const int iterations = gmres.solve([&](const Eigen::VectorXd& v, Eigen::VectorXd& out) { out = M * v; },
+                                     [&](const Eigen::VectorXd& v, Eigen::VectorXd& out) { out = P * v; },
+                                     b, x, 1e-10, 50);
+  EXPECT_LT(iterations, 50);
+  EXPECT_LE((M * x - b).norm(), 1e-9 * b.norm());
+  EXPECT_LE(gmres.relative_residual(), 1e-10);
+}
+
+}  // namespace
+}  // namespace liver_sim
