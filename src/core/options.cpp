@@ -1,0 +1,80 @@
+#include "liver_sim/options.h"
+
+#include <cmath>
+#include <sstream>
+
+namespace liver_sim {
+namespace {
+
+std::string message(const std::string& field, const char* rule, double value) {
+  std::ostringstream s;
+  s << field << " must be " << rule << " (got " << value << ")";
+  return s.str();
+}
+
+std::string positive(const std::string& field, double v) {
+  return (std::isfinite(v) && v > 0) ? "" : message(field, "finite and > 0", v);
+}
+
+std::string non_negative(const std::string& field, double v) {
+  return (std::isfinite(v) && v >= 0) ? "" : message(field, "finite and >= 0", v);
+}
+
+std::string poisson(const std::string& field, double v) {
+  return (std::isfinite(v) && v > -1 && v < 0.5) ? "" : message(field, "in (-1, 0.5)", v);
+}
+
+std::string first_error(std::initializer_list<std::string> errors) {
+  for (const std::string& e : errors)
+    if (!e.empty()) return e;
+  return "";
+}
+
+}  // namespace
+
+std::string validate(const ParenchymaOptions& o) {
+  return first_error({positive("parenchyma.young_modulus", o.young_modulus),
+                      poisson("parenchyma.poisson_ratio", o.poisson_ratio),
+                      positive("parenchyma.density", o.density)});
+}
+
+std::string validate(const CapsuleOptions& o) {
+  std::string region;
+  if (o.region) {
+    region = validate(*o.region);
+    if (!region.empty()) region = "capsule.region: " + region;
+  }
+  return first_error({positive("capsule.young_modulus", o.young_modulus),
+                      positive("capsule.thickness", o.thickness),
+                      poisson("capsule.poisson_ratio", o.poisson_ratio), region});
+}
+
+std::string validate(const SolverOptions& o) {
+  return first_error({positive("solver.dt", o.dt),
+                      o.steps >= 1 ? "" : message("solver.steps", ">= 1", o.steps),
+                      o.max_iterations >= 1 ? "" : message("solver.max_iterations", ">= 1", o.max_iterations),
+                      positive("solver.tolerance", o.tolerance),
+                      non_negative("solver.rayleigh_mass", o.rayleigh_mass),
+                      non_negative("solver.rayleigh_stiffness", o.rayleigh_stiffness)});
+}
+
+std::string validate(const Region& r) {
+  if (!r.min.allFinite() || !r.max.allFinite() || !r.center.allFinite() || !r.normal.allFinite())
+    return "region coordinates must be finite";
+  switch (r.kind) {
+    case Region::Kind::Box:
+      return (r.min.array() < r.max.array()).all() ? "" : "box: min must be below max on every axis";
+    case Region::Kind::Sphere:
+      return positive("sphere.radius", r.radius);
+    case Region::Kind::Disc:
+      return first_error({positive("disc.radius", r.radius),
+                          (r.inner_radius >= 0 && r.inner_radius < r.radius)
+                              ? ""
+                              : message("disc.inner_radius", "in [0, radius)", r.inner_radius),
+                          r.normal.norm() > 0 ? "" : "disc.normal must be non-zero",
+                          std::isfinite(r.depth) ? "" : message("disc.depth", "finite", r.depth)});
+  }
+  return "";
+}
+
+}  // namespace liver_sim

@@ -1,0 +1,316 @@
+#include "liver_sim/scene.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+namespace liver_sim {
+namespace {
+
+// Reads one YAML tree into a Scene; every error names the origin and the dotted key.
+class Reader {
+ public:
+  explicit Reader(std::string origin) : origin_(std::move(origin)) {}
+
+  [[noreturn]] void fail(const std::string& key, const std::string& message) const {
+    throw SceneError(origin_ + ": " + (key.empty() ? "" : key + ": ") + message);
+  }
+
+  void require_valid(const std::string& message) const {
+    if (!message.empty()) throw SceneError(origin_ + ": " + message);
+  }
+
+  void check_keys(const YAML::Node& node, const std::string& key, const std::set<std::string>& allowed) const {
+    if (!node.IsMap()) fail(key, "expected a map");
+    for (const auto& kv : node) {
+      const std::string name = kv.first.as<std::string>();
+      if (!allowed.count(name)) fail("", "unknown key '" + join(key, name) + "'");
+    }
+  }
+
+  static std::string join(const std::string& key, const std::string& name) {
+    return key.empty() ? name : key + "." + name;
+  }
+
+  double number(const YAML::Node& node, const std::string& key) const {
+    if (!node.IsScalar()) fail(key, "expected a number");
+    double v;
+    try {
+      v = node.as<double>();
+    } catch (const YAML::Exception&) {
+      fail(key, "expected a number, got '" + node.Scalar() + "'");
+    }
+    if (!std::isfinite(v)) fail(key, "must be finite");
+    return v;
+  }
+
+  int integer(const YAML::Node& node, const std::string& key) const {
+    if (!node.IsScalar()) fail(key, "expected an integer");
+    try {
+      return node.as<int>();
+    } catch (const YAML::Exception&) {
+      fail(key, "expected an integer, got '" + node.Scalar() + "'");
+    }
+  }
+
+  bool boolean(const YAML::Node& node, const std::string& key) const {
+    if (!node.IsScalar()) fail(key, "expected true or false");
+    try {
+      return node.as<bool>();
+    } catch (const YAML::Exception&) {
+      fail(key, "expected true or false, got '" + node.Scalar() + "'");
+    }
+  }
+
+  std::string word(const YAML::Node& node, const std::string& key, const std::set<std::string>& allowed) const {
+    const std::string w = node.IsScalar() ? node.Scalar() : "";
+    if (!allowed.count(w)) {
+      std::string list;
+      for (const std::string& a : allowed) list += (list.empty() ? "" : " | ") + a;
+      fail(key, "expected " + list + (w.empty() ? "" : ", got '" + w + "'"));
+    }
+    return w;
+  }
+
+  Eigen::Vector3d vec3(const YAML::Node& node, const std::string& key) const {
+    if (!node.IsSequence() || node.size() != 3) fail(key, "expected a list of 3 numbers");
+    Eigen::Vector3d v;
+    for (int i = 0; i < 3; ++i) v[i] = number(node[i], key + "." + std::to_string(i));
+    return v;
+  }
+
+  const YAML::Node required(const YAML::Node& map, const std::string& key, const std::string& name) const {
+    const YAML::Node n = map[name];
+    if (!n) fail(join(key, name), "missing");
+    return n;
+  }
+
+  Region region(const YAML::Node& node, const std::string& key) const {
+    check_keys(node, key, {"box", "sphere", "disc"});
+    if (node.size() != 1) fail(key, "expected exactly one of box, sphere, disc");
+    Region r;
+    if (const YAML::Node b = node["box"]) {
+      const std::string k = key + ".box";
+      check_keys(b, k, {"min", "max"});
+      r.kind = Region::Kind::Box;
+      r.min = vec3(required(b, k, "min"), k + ".min");
+      r.max = vec3(required(b, k, "max"), k + ".max");
+    } else if (const YAML::Node s = node["sphere"]) {
+      const std::string k = key + ".sphere";
+      check_keys(s, k, {"center", "radius"});
+      r.kind = Region::Kind::Sphere;
+      r.center = vec3(required(s, k, "center"), k + ".center");
+      r.radius = number(required(s, k, "radius"), k + ".radius");
+    } else {
+      const YAML::Node d = node["disc"];
+      const std::string k = key + ".disc";
+      check_keys(d, k, {"center", "normal", "radius", "inner_radius", "depth"});
+      r.kind = Region::Kind::Disc;
+      r.center = vec3(required(d, k, "center"), k + ".center");
+      r.normal = vec3(required(d, k, "normal"), k + ".normal");
+      r.radius = number(required(d, k, "radius"), k + ".radius");
+      if (d["inner_radius"]) r.inner_radius = number(d["inner_radius"], k + ".inner_radius");
+      if (d["depth"]) r.depth = number(d["depth"], k + ".depth");
+    }
+    const std::string error = validate(r);
+    if (!error.empty()) fail(key, error);
+    return r;
+  }
+
+  Scene scene(const YAML::Node& root, const std::string& base_dir) const {
+    if (!root.IsMap()) fail("", "expected a map of sections");
+    check_keys(root, "", {"mesh", "parenchyma", "capsule", "fixed", "loads", "solver", "probes"});
+    Scene s;
+    read_mesh_source(required(root, "", "mesh"), base_dir, s.mesh);
+    if (const YAML::Node p = root["parenchyma"]) {
+      check_keys(p, "parenchyma", {"young_modulus", "poisson_ratio", "density", "rotation"});
+      if (p["young_modulus"]) s.parenchyma.young_modulus = number(p["young_modulus"], "parenchyma.young_modulus");
+      if (p["poisson_ratio"]) s.parenchyma.poisson_ratio = number(p["poisson_ratio"], "parenchyma.poisson_ratio");
+      if (p["density"]) s.parenchyma.density = number(p["density"], "parenchyma.density");
+      if (p["rotation"])
+        s.parenchyma.rotation = word(p["rotation"], "parenchyma.rotation", {"polar", "geometric"}) == "polar"
+                                    ? RotationMethod::Polar
+                                    : RotationMethod::Geometric;
+    }
+    if (const YAML::Node c = root["capsule"]) {
+      check_keys(c, "capsule", {"enabled", "young_modulus", "thickness", "poisson_ratio", "region"});
+      if (c["enabled"]) s.capsule.enabled = boolean(c["enabled"], "capsule.enabled");
+      if (c["young_modulus"]) s.capsule.young_modulus = number(c["young_modulus"], "capsule.young_modulus");
+      if (c["thickness"]) s.capsule.thickness = number(c["thickness"], "capsule.thickness");
+      if (c["poisson_ratio"]) s.capsule.poisson_ratio = number(c["poisson_ratio"], "capsule.poisson_ratio");
+      if (c["region"]) s.capsule.region = region(c["region"], "capsule.region");
+    }
+    if (const YAML::Node f = root["fixed"]) {
+      if (!f.IsSequence()) fail("fixed", "expected a list of regions");
+      for (size_t i = 0; i < f.size(); ++i) s.fixed.push_back(region(f[i], "fixed." + std::to_string(i)));
+    }
+    if (const YAML::Node l = root["loads"]) {
+      if (!l.IsSequence()) fail("loads", "expected a list of loads");
+      for (size_t i = 0; i < l.size(); ++i) s.loads.push_back(load(l[i], "loads." + std::to_string(i)));
+    }
+    if (const YAML::Node v = root["solver"]) read_solver(v, s.solver);
+    if (const YAML::Node p = root["probes"]) {
+      if (!p.IsSequence()) fail("probes", "expected a list of probes");
+      std::set<std::string> names;
+      for (size_t i = 0; i < p.size(); ++i) {
+        const std::string k = "probes." + std::to_string(i);
+        check_keys(p[i], k, {"name", "point"});
+        ProbeOptions probe;
+        probe.name = required(p[i], k, "name").as<std::string>();
+        if (probe.name.empty() || !names.insert(probe.name).second)
+          fail(k + ".name", "probe names must be non-empty and unique");
+        probe.point = vec3(required(p[i], k, "point"), k + ".point");
+        s.probes.push_back(probe);
+      }
+    }
+    require_valid(validate(s.parenchyma));
+    require_valid(validate(s.capsule));
+    require_valid(validate(s.solver));
+    return s;
+  }
+
+ private:
+  void read_mesh_source(const YAML::Node& m, const std::string& base_dir, MeshSource& out) const {
+    check_keys(m, "mesh", {"file", "scale", "box"});
+    if (static_cast<bool>(m["file"]) == static_cast<bool>(m["box"]))
+      fail("mesh", "expected exactly one of file, box");
+    if (const YAML::Node f = m["file"]) {
+      if (!f.IsScalar() || f.Scalar().empty()) fail("mesh.file", "expected a path");
+      const std::filesystem::path p(f.Scalar());
+      out.file = p.is_absolute() ? p.string() : (std::filesystem::path(base_dir) / p).string();
+      if (m["scale"]) {
+        out.scale = number(m["scale"], "mesh.scale");
+        if (out.scale <= 0) fail("mesh.scale", "must be > 0");
+      }
+      return;
+    }
+    if (m["scale"]) fail("mesh.scale", "only with mesh.file");
+    const YAML::Node b = m["box"];
+    check_keys(b, "mesh.box", {"size", "divisions"});
+    out.box_size = vec3(required(b, "mesh.box", "size"), "mesh.box.size");
+    if ((out.box_size.array() <= 0).any()) fail("mesh.box.size", "must be three positive lengths");
+    const YAML::Node d = required(b, "mesh.box", "divisions");
+    if (!d.IsSequence() || d.size() != 3) fail("mesh.box.divisions", "expected a list of 3 integers");
+    for (int i = 0; i < 3; ++i) {
+      out.box_divisions[i] = integer(d[i], "mesh.box.divisions." + std::to_string(i));
+      if (out.box_divisions[i] < 1) fail("mesh.box.divisions", "must be >= 1");
+    }
+  }
+
+  LoadOptions load(const YAML::Node& node, const std::string& key) const {
+    if (!node.IsMap()) fail(key, "expected a map");
+    const std::string type = word(required(node, key, "type"), key + ".type", {"pressure", "gravity", "force"});
+    LoadOptions l;
+    if (type == "pressure") {
+      check_keys(node, key, {"type", "value", "region"});
+      l.kind = LoadOptions::Kind::Pressure;
+      l.pressure = number(required(node, key, "value"), key + ".value");
+      if (node["region"]) l.region = region(node["region"], key + ".region");
+    } else if (type == "gravity") {
+      check_keys(node, key, {"type", "acceleration"});
+      l.kind = LoadOptions::Kind::Gravity;
+      l.vector = vec3(required(node, key, "acceleration"), key + ".acceleration");
+    } else {
+      check_keys(node, key, {"type", "total", "region"});
+      l.kind = LoadOptions::Kind::Force;
+      l.vector = vec3(required(node, key, "total"), key + ".total");
+      l.region = region(required(node, key, "region"), key + ".region");
+    }
+    return l;
+  }
+
+  void read_solver(const YAML::Node& v, SolverOptions& o) const {
+    check_keys(v, "solver", {"mode", "dt", "steps", "max_iterations", "tolerance", "line_search",
+                             "rayleigh_mass", "rayleigh_stiffness"});
+    if (v["mode"])
+      o.mode = word(v["mode"], "solver.mode", {"static", "dynamic"}) == "static" ? SolverOptions::Mode::Static
+                                                                                : SolverOptions::Mode::Dynamic;
+    if (v["dt"]) o.dt = number(v["dt"], "solver.dt");
+    if (v["steps"]) o.steps = integer(v["steps"], "solver.steps");
+    if (v["max_iterations"]) o.max_iterations = integer(v["max_iterations"], "solver.max_iterations");
+    if (v["tolerance"]) o.tolerance = number(v["tolerance"], "solver.tolerance");
+    if (v["line_search"]) o.line_search = boolean(v["line_search"], "solver.line_search");
+    if (v["rayleigh_mass"]) o.rayleigh_mass = number(v["rayleigh_mass"], "solver.rayleigh_mass");
+    if (v["rayleigh_stiffness"]) o.rayleigh_stiffness = number(v["rayleigh_stiffness"], "solver.rayleigh_stiffness");
+  }
+
+  std::string origin_;
+};
+
+// Sets the scalar at `path` (dotted; numbers index sequences), creating missing map keys.
+void apply_override(YAML::Node node, const std::vector<std::string>& path, size_t i, const std::string& value,
+                    const Reader& reader, const std::string& text) {
+  const std::string& key = path[i];
+  const bool last = i + 1 == path.size();
+  if (node.IsSequence()) {
+    size_t index = 0;
+    try {
+      size_t used = 0;
+      index = std::stoul(key, &used);
+      if (used != key.size()) throw std::invalid_argument(key);
+    } catch (const std::exception&) {
+      reader.fail("--set " + text, "'" + key + "' is not a list index");
+    }
+    if (index >= node.size()) reader.fail("--set " + text, "index " + key + " out of range");
+    YAML::Node child = node[index];
+    if (!last) return apply_override(child, path, i + 1, value, reader, text);
+    if (child.IsMap() || child.IsSequence()) reader.fail("--set " + text, "only scalars can be overridden");
+    node[index] = value;
+    return;
+  }
+  if (!node.IsMap() && !node.IsNull()) reader.fail("--set " + text, "the path runs through a scalar");
+  const YAML::Node existing = static_cast<const YAML::Node&>(node)[key];
+  if (last) {
+    if (existing && (existing.IsMap() || existing.IsSequence()))
+      reader.fail("--set " + text, "only scalars can be overridden");
+    node[key] = value;
+    return;
+  }
+  if (!existing || existing.IsNull()) node[key] = YAML::Node(YAML::NodeType::Map);
+  apply_override(node[key], path, i + 1, value, reader, text);
+}
+
+}  // namespace
+
+Scene parse_scene(const std::string& yaml, const std::string& base_dir, const std::string& origin,
+                  const std::vector<std::string>& overrides) {
+  const Reader reader(origin);
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml);
+  } catch (const YAML::Exception& e) {
+    reader.fail("", std::string("YAML syntax: ") + e.what());
+  }
+  if (!root.IsDefined() || root.IsNull()) reader.fail("", "empty scene");
+  for (const std::string& text : overrides) {
+    const size_t eq = text.find('=');
+    if (eq == std::string::npos || eq == 0) reader.fail("--set " + text, "expected dotted.key=value");
+    std::vector<std::string> path;
+    std::stringstream keys(text.substr(0, eq));
+    for (std::string part; std::getline(keys, part, '.');) {
+      if (part.empty()) reader.fail("--set " + text, "empty key component");
+      path.push_back(part);
+    }
+    apply_override(root, path, 0, text.substr(eq + 1), reader, text);
+  }
+  try {
+    return reader.scene(root, base_dir);
+  } catch (const YAML::Exception& e) {
+    reader.fail("", e.what());
+  }
+}
+
+Scene load_scene(const std::string& path, const std::vector<std::string>& overrides) {
+  std::ifstream in(path);
+  if (!in) throw SceneError(path + ": cannot open");
+  std::stringstream text;
+  text << in.rdbuf();
+  const std::string dir = std::filesystem::absolute(path).parent_path().string();
+  return parse_scene(text.str(), dir, path, overrides);
+}
+
+}  // namespace liver_sim

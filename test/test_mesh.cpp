@@ -1,0 +1,253 @@
+// Meshes: box generation, boundary extraction, quality checks, loaders and writers, and the two
+// third-party SOFA liver meshes.
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+
+#include "liver_sim/mesh.h"
+
+namespace liver_sim {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path temp_dir() {
+  const fs::path d = fs::temp_directory_path() / ("liver_sim_test_mesh_" + std::to_string(::getpid()));
+  fs::create_directories(d);
+  return d;
+}
+
+std::string write_file(const std::string& name, const std::string& text) {
+  const fs::path p = temp_dir() / name;
+  std::ofstream(p) << text;
+  return p.string();
+}
+
+// Message of the MeshError thrown by read_mesh, or "" when it loads.
+std::string load_error(const std::string& path) {
+  try {
+    read_mesh(path);
+  } catch (const MeshError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+double total_volume(const TetMesh& m) {
+  double v = 0;
+  for (int t = 0; t < m.T.rows(); ++t) v += signed_volume(m.V, m.T, t);
+  return v;
+}
+
+Eigen::Vector3d area_vector(const Eigen::MatrixX3d& V, const Eigen::Vector3i& f) {
+  return 0.5 * (V.row(f[1]) - V.row(f[0])).transpose().cross((V.row(f[2]) - V.row(f[0])).transpose());
+}
+
+// Closed, consistently outward surface: every edge shared by exactly two triangles in opposite
+// directions, area vectors summing to zero, and the divergence-theorem volume equal to the sum
+// of the tetrahedron volumes.
+void expect_closed_outward_boundary(const TetMesh& m) {
+  const Eigen::MatrixX3i B = boundary_triangles(m.T);
+  std::map<std::pair<int, int>, int> directed;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double area = 0, volume = 0;
+  for (int f = 0; f < B.rows(); ++f) {
+    for (int k = 0; k < 3; ++k) ++directed[{B(f, k), B(f, (k + 1) % 3)}];
+    const Eigen::Vector3d a = area_vector(m.V, B.row(f));
+    sum += a;
+    area += a.norm();
+    const Eigen::Vector3d c = (m.V.row(B(f, 0)) + m.V.row(B(f, 1)) + m.V.row(B(f, 2))).transpose() / 3;
+    volume += c.dot(a) / 3;
+  }
+  for (const auto& [edge, n] : directed) {
+    ASSERT_EQ(n, 1) << "edge " << edge.first << "-" << edge.second << " used twice in one direction";
+    ASSERT_EQ(directed.count({edge.second, edge.first}), 1u) << "open edge";
+  }
+  EXPECT_LE(sum.norm(), 1e-9 * area);
+  EXPECT_NEAR(volume, total_volume(m), 1e-9 * total_volume(m));
+}
+
+TEST(BoxMesh, CountsVolumeAndOrientation) {
+  const Eigen::Vector3d size(0.015, 0.012, 0.009);
+  const TetMesh m = make_box_mesh(size, {8, 6, 4});
+  EXPECT_EQ(m.V.rows(), 9 * 7 * 5);
+  EXPECT_EQ(m.T.rows(), 5 * 8 * 6 * 4);
+  EXPECT_TRUE(check_mesh(m).ok());
+  EXPECT_NEAR(total_volume(m), size.prod(), 1e-12 * size.prod());
+}
+
+TEST(BoxMesh, BoundaryIsTheBoxSurfaceFacingOutward) {
+  const Eigen::Vector3d size(0.015, 0.015, 0.015);
+  const TetMesh m = make_box_mesh(size, {8, 8, 8});
+  EXPECT_EQ(m.V.rows(), 729);
+  EXPECT_EQ(m.T.rows(), 2560);
+  const Eigen::MatrixX3i B = boundary_triangles(m.T);
+  EXPECT_EQ(B.rows(), 2 * 6 * 64);  // conforming: two triangles per boundary quad, none inside
+  for (int f = 0; f < B.rows(); ++f) {
+    const Eigen::Vector3d c = (m.V.row(B(f, 0)) + m.V.row(B(f, 1)) + m.V.row(B(f, 2))).transpose() / 3;
+    const Eigen::Vector3d n = area_vector(m.V, B.row(f)).normalized();
+    const Eigen::Vector3d d = c - size / 2;
+    int axis;
+    d.cwiseAbs().maxCoeff(&axis);
+    ASSERT_NEAR(std::abs(d[axis]), size[axis] / 2, 1e-12) << "triangle " << f << " is not on a face";
+    ASSERT_NEAR(n[axis], d[axis] > 0 ? 1.0 : -1.0, 1e-12) << "triangle " << f << " faces inward";
+  }
+  expect_closed_outward_boundary(m);
+}
+
+TEST(BoxMesh, MirrorSymmetricAboutMidPlanes) {
+  const Eigen::Vector3d size(0.015, 0.015, 0.015);
+  const TetMesh m = make_box_mesh(size, {4, 4, 4});
+  auto centroids = [&](int axis) {
+    std::vector<std::array<long long, 3>> c;
+    for (int t = 0; t < m.T.rows(); ++t) {
+      Eigen::Vector3d p = Eigen::Vector3d::Zero();
+      for (int k = 0; k < 4; ++k) p += m.V.row(m.T(t, k)).transpose() / 4;
+      if (axis >= 0) p[axis] = size[axis] - p[axis];
+      c.push_back({std::llround(p.x() * 1e9), std::llround(p.y() * 1e9), std::llround(p.z() * 1e9)});
+    }
+    std::sort(c.begin(), c.end());
+    return c;
+  };
+  const auto original = centroids(-1);
+  for (int axis = 0; axis < 3; ++axis) EXPECT_EQ(centroids(axis), original) << "axis " << axis;
+}
+
+TEST(BoxMesh, RejectsBadSizes) {
+  EXPECT_THROW(make_box_mesh({0.01, 0, 0.01}, {2, 2, 2}), MeshError);
+  EXPECT_THROW(make_box_mesh({0.01, 0.01, std::nan("")}, {2, 2, 2}), MeshError);
+  EXPECT_THROW(make_box_mesh({0.01, 0.01, 0.01}, {2, 0, 2}), MeshError);
+}
+
+TEST(Boundary, SingleAndTwoTetrahedra) {
+  TetMesh m;
+  m.V.resize(5, 3);
+  m.V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1;
+  m.T.resize(1, 4);
+  m.T << 0, 1, 2, 3;
+  EXPECT_EQ(boundary_triangles(m.T).rows(), 4);
+  expect_closed_outward_boundary(m);
+  m.T.resize(2, 4);
+  m.T << 0, 1, 2, 3, 1, 2, 3, 4;
+  if (signed_volume(m.V, m.T, 1) < 0) std::swap(m.T(1, 2), m.T(1, 3));
+  EXPECT_EQ(boundary_triangles(m.T).rows(), 6);
+  expect_closed_outward_boundary(m);
+}
+
+TEST(MeshCheck, ReportsInvertedAndDegenerateIndices) {
+  TetMesh m = make_box_mesh({1, 1, 1}, {1, 1, 2});
+  std::swap(m.T(3, 0), m.T(3, 1));  // inverted
+  m.T(7, 3) = m.T(7, 0);            // repeated node
+  const MeshCheck c = check_mesh(m);
+  EXPECT_EQ(c.inverted, std::vector<int>{3});
+  EXPECT_EQ(c.degenerate, std::vector<int>{7});
+  try {
+    validate_mesh(m, "m");
+    FAIL() << "validate_mesh accepted a bad mesh";
+  } catch (const MeshError& e) {
+    EXPECT_NE(std::string(e.what()).find("7"), std::string::npos) << e.what();
+  }
+}
+
+TEST(MeshIO, RoundTripsThroughEveryWriter) {
+  const TetMesh m = make_box_mesh({0.0152, 0.0113, 0.0097}, {3, 2, 2});
+  using Writer = void (*)(const std::string&, const TetMesh&);
+  const std::vector<std::pair<std::string, Writer>> writers = {
+      {"m22.msh", write_gmsh22}, {"m41.msh", write_gmsh41}, {"m.vtk", write_vtk}};
+  for (const auto& [name, write] : writers) {
+    const std::string path = (temp_dir() / name).string();
+    write(path, m);
+    const TetMesh r = read_mesh(path);
+    EXPECT_EQ(r.T, m.T) << name;
+    EXPECT_EQ(r.V, m.V) << name;
+    const TetMesh scaled = read_mesh(path, 0.001);
+    EXPECT_LE((scaled.V - 0.001 * m.V).cwiseAbs().maxCoeff(), 1e-18) << name;
+  }
+}
+
+TEST(MeshIO, IgnoresOtherElementsAndUnusedNodes) {
+  const std::string path = write_file("mixed.msh",
+                                      "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n"
+                                      "$PhysicalNames\n1\n3 1 \"liver\"\n$EndPhysicalNames\n"
+                                      "$Nodes\n6\n10 0 0 0\n20 1 0 0\n30 0 1 0\n40 0 0 1\n50 5 5 5\n60 1 1 1\n$EndNodes\n"
+                                      "$Elements\n4\n1 15 2 0 0 50\n2 2 2 0 0 10 20 30\n"
+                                      "3 4 2 1 1 10 20 30 40\n4 1 2 0 0 10 60\n$EndElements\n");
+  const TetMesh m = read_mesh(path);
+  EXPECT_EQ(m.T.rows(), 1);
+  EXPECT_EQ(m.V.rows(), 4);
+}
+
+TEST(MeshIO, ReorientsAFileWhoseTetrahedraAreAllNegative) {
+  TetMesh m = make_box_mesh({1, 1, 1}, {2, 1, 1});
+  m.T.col(0).swap(m.T.col(1));
+  const std::string path = (temp_dir() / "negative.msh").string();
+  write_gmsh22(path, m);
+  const TetMesh r = read_mesh(path);
+  EXPECT_TRUE(check_mesh(r).ok());
+}
+
+TEST(MeshIO, RejectsMalformedFilesNamingFileAndProblem) {
+  const std::string tet22 = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"", "empty"},
+      {"hello world\n", "unknown format"},
+      {"$NOD\n3\n1 0 0 0\n2 1 0 0\n", "end of file"},
+      {tet22 + "$Elements\n1\n1 4 2 1 1 1 2 3 9\n$EndElements\n", "undefined node"},
+      {"$NOD\n4\n1 0 0 0\n2 1 x 0\n3 0 1 0\n4 0 0 1\n$ENDNOD\n$ELM\n1\n1 4 1 1 4 1 2 3 4\n$ENDELM\n", "'x'"},
+      {"$NOD\n4\n1 0 0 0\n2 1 nan 0\n3 0 1 0\n4 0 0 1\n$ENDNOD\n$ELM\n1\n1 4 1 1 4 1 2 3 4\n$ENDELM\n", "not finite"},
+      {tet22 + "$Elements\n1\n1 2 2 1 1 1 2 3\n$EndElements\n", "no tetrahedra"},
+      {"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 2 0 0\n4 3 0 0\n$EndNodes\n"
+       "$Elements\n1\n1 4 2 1 1 1 2 3 4\n$EndElements\n", "degenerate"},
+      {"$MeshFormat\n2.2 1 8\n$EndMeshFormat\n", "binary"},
+      {"# vtk DataFile Version 3.0\nx\nBINARY\nDATASET UNSTRUCTURED_GRID\n", "ASCII"},
+      {"# vtk DataFile Version 3.0\nx\nASCII\nDATASET POLYDATA\n", "UNSTRUCTURED_GRID"},
+      {"$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n"
+       "$EndNodes\n$Elements\n1 1 1 1\n3 1 99 1\n1 1 2 3 4\n$EndElements\n", "unknown element type"},
+  };
+  for (size_t i = 0; i < cases.size(); ++i) {
+    const std::string name = "bad" + std::to_string(i) + ".msh";
+    const std::string message = load_error(write_file(name, cases[i].first));
+    EXPECT_NE(message.find(name), std::string::npos) << "case " << i << ": " << message;
+    EXPECT_NE(message.find(cases[i].second), std::string::npos) << "case " << i << ": " << message;
+  }
+  EXPECT_NE(load_error((temp_dir() / "missing.msh").string()).find("cannot open"), std::string::npos);
+}
+
+TEST(MeshIO, MixedOrientationIsRejectedWithTheElementIndex) {
+  TetMesh m = make_box_mesh({1, 1, 1}, {1, 1, 1});
+  std::swap(m.T(1, 0), m.T(1, 1));
+  const std::string path = (temp_dir() / "mixed_orientation.msh").string();
+  write_gmsh22(path, m);
+  const std::string message = load_error(path);
+  EXPECT_NE(message.find("1 inverted tetrahedra (of 5): 1"), std::string::npos) << message;
+}
+
+// The two SOFA liver meshes: legacy Gmsh 1.0, non-contiguous node ids, mixed element types.
+struct SofaMesh {
+  const char* file;
+  int tetrahedra;
+};
+class SofaLiverMesh : public ::testing::TestWithParam<SofaMesh> {};
+
+TEST_P(SofaLiverMesh, LoadsAsAClosedValidVolume) {
+  const std::string path = std::string(LIVER_SIM_SHARED_DATA) + "/sofa-liver/" + GetParam().file;
+  if (!fs::exists(path)) GTEST_SKIP() << path << " not found (shared data folder absent)";
+  const TetMesh m = read_mesh(path, 0.01);
+  EXPECT_EQ(m.T.rows(), GetParam().tetrahedra);
+  EXPECT_TRUE(check_mesh(m).ok());
+  expect_closed_outward_boundary(m);
+}
+
+INSTANTIATE_TEST_SUITE_P(Both, SofaLiverMesh,
+                         ::testing::Values(SofaMesh{"liver.msh", 596}, SofaMesh{"liver2.msh", 1493}),
+                         [](const auto& info) {
+                           const std::string f = info.param.file;
+                           return f.substr(0, f.find('.'));
+                         });
+
+}  // namespace
+}  // namespace liver_sim
