@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """The reference aspiration test, with and without Glisson's capsule.
 
 Runs the `simulate` tool on config/scenes/aspiration_cube.yaml and draws

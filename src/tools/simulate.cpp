@@ -114,7 +114,7 @@ int run(const Options& opt) {
   std::vector<double> step_ms;
   StepResult last;
   liver_sim::StepTiming sum;
-  int iterations = 0, max_iterations = 0, converged_steps = 0, steps_done = 0;
+  int iterations = 0, max_iterations = 0, linear_iterations = 0, converged_steps = 0, steps_done = 0;
   auto last_report = std::chrono::steady_clock::now();
   for (int k = 1; k <= steps; ++k) {
     if (!dynamic) model.set_load_scale(static_cast<double>(k) / steps);
@@ -125,6 +125,7 @@ int run(const Options& opt) {
     sum.factorization_ms += last.timing.factorization_ms;
     sum.solve_ms += last.timing.solve_ms;
     iterations += last.iterations;
+    linear_iterations += last.linear_iterations;
     max_iterations = std::max(max_iterations, last.iterations);
     converged_steps += last.converged();
     if (csv.is_open()) {
@@ -168,6 +169,7 @@ int run(const Options& opt) {
      << "  \"steps\": " << steps_done << ",\n"
      << "  \"time\": " << model.time() << ",\n"
      << "  \"newton_iterations\": {\"total\": " << iterations << ", \"max_per_step\": " << max_iterations << "},\n"
+     << "  \"gmres_iterations\": " << linear_iterations << ",\n"
      << "  \"step_time_ms\": {\"min\": " << sorted.front() << ", \"median\": " << sorted[sorted.size() / 2]
      << ", \"max\": " << sorted.back() << "},\n"
      << "  \"phase_time_ms_per_step\": {\"assembly\": " << sum.assembly_ms / steps_done
