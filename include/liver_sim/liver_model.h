@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -64,7 +65,21 @@ class LiverModel {
   std::string set_capsule(const CapsuleOptions& capsule);
   const CapsuleOptions& capsule() const { return capsule_; }
 
-  // Back to the rest shape, zero velocity, time 0; parameters are kept.
+  // A rigid sphere probe (centre and radius in m) in sticking contact with the boundary: at each
+  // step the boundary nodes inside it are moved onto its surface and held there, and nodes the
+  // probe would have to pull are released (exact constraint forces, no penalty). Throws
+  // std::invalid_argument for a non-finite centre or a radius <= 0.
+  void set_sphere_probe(const Eigen::Vector3d& centre, double radius);
+  void remove_sphere_probe();
+  struct ProbeReaction {
+    Eigen::Vector3d force = Eigen::Vector3d::Zero();   // N, exerted by the tissue on the probe
+    Eigen::Vector3d torque = Eigen::Vector3d::Zero();  // N m, about the sphere centre
+    int contacts = 0;                                  // nodes held by the probe
+  };
+  const ProbeReaction& probe_reaction() const { return probe_reaction_; }
+
+  // Back to the rest shape, zero velocity, time 0; parameters are kept (a probe stays set but
+  // holds nothing until the next step).
   void reset();
 
   const TetMesh& mesh() const { return mesh_; }
@@ -110,7 +125,15 @@ class LiverModel {
   void set_fixed(const std::vector<int>& nodes);
   // Residual r = loads - internal - inertia - damping at x (dynamic terms use x_start_, v_).
   // Returns its free-DOF norm and the reference norm it is measured against.
-  double residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference);
+  // With zero_fixed = false the entries at fixed DOFs are kept: minus the constraint forces.
+  double residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference, bool zero_fixed = true);
+  // Line-search merit: the free residual norm and the gap to prescribed positions, in newtons.
+  double merit(double residual_norm, const Eigen::VectorXd& x) const;
+  // Newton iterations from the current state; adds to result (iterations, timings, status).
+  void newton(StepResult& result);
+  void update_contacts();
+  bool release_tensile_contacts();  // true when a node was released
+  void update_probe_reaction();
   // Tangent of -residual into system_ (fixed DOFs become identity rows), with the element
   // rotations of the last residual() call: the solver always assembles where it last evaluated.
   void assemble_system();
@@ -129,17 +152,28 @@ class LiverModel {
   std::vector<double> stiffness_, system_;
   std::vector<double> damping_stiffness_;  // K at the start of a dynamic step (Rayleigh b K)
   std::vector<int> fixed_entries_;      // off-diagonal values in fixed rows/columns
+  std::vector<int> scene_fixed_nodes_;
+  std::vector<int> boundary_nodes_;
+  struct SphereProbe {
+    Eigen::Vector3d centre;
+    double radius;
+  };
+  std::optional<SphereProbe> probe_;
+  std::vector<int> contact_nodes_;
+  std::vector<char> released_;  // per node, within the current step
+  ProbeReaction probe_reaction_;
   std::vector<char> fixed_dof_;
   CholmodSolver solver_cholmod_;
 
   Eigen::VectorXd X_, x_, v_, x_start_;
+  Eigen::VectorXd target_;  // prescribed positions of fixed DOFs (rest, or on the probe)
   Eigen::VectorXd mass_;  // lumped, per DOF (kg)
   std::vector<PressureLoad> pressures_;
   std::vector<NodalLoad> nodal_loads_;  // gravity and spread forces
   std::vector<Probe> probes_;
   double load_scale_ = 1.0;
   double time_ = 0.0;
-  double force_floor_;   // absolute residual floor (N) for load-free states
+  double force_floor_;   // residual (N) below which a state counts as converged: round-off, 1e-12 E L^2
   double length_scale_;  // bounding-box diagonal (m)
   Gmres gmres_;
 

@@ -84,6 +84,7 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
 
   X_ = flatten(mesh_.V);
   x_ = X_;
+  target_ = X_;
   v_ = Eigen::VectorXd::Zero(3 * n);
   x_start_ = X_;
   mass_ = Eigen::VectorXd::Zero(3 * n);
@@ -104,7 +105,11 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
   }
   if (fixed_nodes.empty() && solver_.mode == SolverOptions::Mode::Static)
     throw std::invalid_argument("fixed: a static scene needs fixed nodes (the stiffness matrix is singular otherwise)");
+  scene_fixed_nodes_ = fixed_nodes;
   set_fixed(fixed_nodes);
+  for (int i = 0; i < n; ++i)
+    if (on_boundary_[i]) boundary_nodes_.push_back(i);
+  released_.assign(n, 0);
 
   for (size_t i = 0; i < scene.loads.size(); ++i) {
     const LoadOptions& load = scene.loads[i];
@@ -227,6 +232,9 @@ int LiverModel::capsule_triangles() const {
 
 void LiverModel::reset() {
   x_ = X_;
+  contact_nodes_.clear();
+  set_fixed(scene_fixed_nodes_);
+  probe_reaction_ = ProbeReaction{};
   v_.setZero();
   x_start_ = X_;
   time_ = 0;
@@ -277,12 +285,13 @@ void LiverModel::external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) c
     for (int node : l.nodes) f.segment<3>(3 * node) += l.force;
 }
 
-double LiverModel::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference) {
+double LiverModel::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference, bool zero_fixed) {
   internal_forces(x, f_tmp_);
   external_forces(x, r);
   r *= load_scale_;
   const double load_norm = free_norm(r, fixed_dof_);
-  const double internal_norm = free_norm(f_tmp_, fixed_dof_);
+  // All DOFs: under prescribed displacements alone the reactions are the force scale.
+  const double internal_norm = f_tmp_.norm();
   r -= f_tmp_;
   if (solver_.mode == SolverOptions::Mode::Dynamic) {
     const double dt = solver_.dt;
@@ -294,7 +303,7 @@ double LiverModel::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double
       r -= solver_.rayleigh_stiffness * f_tmp_;
     }
   }
-  for (int i = 0; i < r.size(); ++i)
+  for (int i = 0; zero_fixed && i < r.size(); ++i)
     if (fixed_dof_[i]) r[i] = 0;
   *reference = std::max({load_norm, internal_norm, force_floor_});
   return r.norm();
@@ -333,12 +342,44 @@ StepResult LiverModel::step() {
   const auto t_step = Clock::now();
   StepResult result;
   x_start_ = x_;  // the last good state, restored if the step diverges
-  auto fail = [&](const std::string& why) {
+  std::fill(released_.begin(), released_.end(), 0);
+  // Sphere probe: constrain the penetrating nodes, solve, release the nodes the probe would have
+  // to pull, solve again (a few active-set passes; the next step continues from there).
+  for (int pass = 0;; ++pass) {
+    if (probe_) update_contacts();
+    newton(result);
+    if (result.status == StepResult::Status::Diverged || !probe_ || !release_tensile_contacts() || pass == 3)
+      break;
+  }
+  if (result.status == StepResult::Status::Diverged) {
     x_ = x_start_;
+    contact_nodes_.clear();  // re-established from the restored state at the next step
+    set_fixed(scene_fixed_nodes_);
+  }
+  update_probe_reaction();  // before the velocity update: the residual needs v_n
+  if (result.status != StepResult::Status::Diverged && solver_.mode == SolverOptions::Mode::Dynamic) {
+    v_ = (x_ - x_start_) / solver_.dt;
+    time_ += solver_.dt;
+  }
+  result.timing.total_ms = ms_since(t_step);
+  return result;
+}
+
+double LiverModel::merit(double residual_norm, const Eigen::VectorXd& x) const {
+  // A gap in a prescribed position counts as the force that a stiffness E L would need to close it.
+  const double k = parenchyma_.young_modulus * length_scale_;
+  double gap2 = 0;
+  for (int i = 0; i < x.size(); ++i)
+    if (fixed_dof_[i]) gap2 += (target_[i] - x[i]) * (target_[i] - x[i]);
+  return std::sqrt(residual_norm * residual_norm + k * k * gap2);
+}
+
+void LiverModel::newton(StepResult& result) {
+  auto fail = [&](const std::string& why) {
     result.status = StepResult::Status::Diverged;
     result.message = why;
   };
-
+  const int iterations_before = result.iterations;
   auto t0 = Clock::now();
   double reference = 0;
   double norm = residual(x_, r_, &reference);
@@ -350,11 +391,16 @@ StepResult LiverModel::step() {
       break;
     }
     result.residual = norm / reference;
-    if (norm <= solver_.tolerance * reference) {
+    // Prescribed positions not reached yet (a probe just moved) are part of the next update.
+    double gap = 0;
+    for (int i = 0; i < r_.size(); ++i)
+      if (fixed_dof_[i]) gap = std::max(gap, std::abs(target_[i] - x_[i]));
+    // Relative to the forces at play; the absolute floor is round-off, for states near rest.
+    if (norm <= std::max(solver_.tolerance * reference, force_floor_) && gap <= 1e-12 * length_scale_) {
       result.status = StepResult::Status::Converged;
       break;
     }
-    if (result.iterations == solver_.max_iterations) {
+    if (result.iterations - iterations_before == solver_.max_iterations) {
       result.message = "iteration cap reached";
       break;
     }
@@ -379,13 +425,18 @@ StepResult LiverModel::step() {
     // are as large as the material stiffness and make a plain modified Newton crawl.
     t0 = Clock::now();
     // A factorisation costs far more than a GMRES iteration: solve each linearisation well.
-    const double forcing = std::max(1e-6, 0.1 * solver_.tolerance * reference / norm);
+    const double merit0 = merit(norm, x_);
+    const double forcing = std::clamp(0.1 * solver_.tolerance * reference / merit0, 1e-6, 0.1);
+    // Constrained rows are identity with the remaining gap on the right-hand side, so that the
+    // free nodes follow the prescribed ones in the same linear solve (consistent lifting).
+    for (int i = 0; i < r_.size(); ++i)
+      if (fixed_dof_[i]) r_[i] = target_[i] - x_[i];
     const Gmres::Operator jacobian = [&](const Eigen::VectorXd& v, Eigen::VectorXd& out) {
       const double h = 1e-8 * length_scale_ / std::max(v.cwiseAbs().maxCoeff(), 1e-300);
       x_try_ = x_ + h * v;
       double unused;
       residual(x_try_, out, &unused);
-      out = (r_ - out) / h;
+      for (int i = 0; i < out.size(); ++i) out[i] = fixed_dof_[i] ? v[i] : (r_[i] - out[i]) / h;
     };
     const Gmres::Operator preconditioner = [&](const Eigen::VectorXd& in, Eigen::VectorXd& out) {
       solver_cholmod_.solve(in, out);
@@ -397,19 +448,21 @@ StepResult LiverModel::step() {
       break;
     }
 
-    // Backtracking on the residual norm guards far from the solution.
+    // Backtracking on the merit (free residual and constraint gap) guards far from the solution.
     t0 = Clock::now();
-    double alpha = 1.0, best_alpha = 1.0, best_norm = std::numeric_limits<double>::infinity();
+    double alpha = 1.0, best_alpha = 1.0, best_norm = 0, best_merit = std::numeric_limits<double>::infinity();
     double ref_try = reference;
     const int max_halvings = solver_.line_search ? 6 : 0;
     for (int h = 0;; ++h) {
       x_try_ = x_ + alpha * dx_;
       const double n_try = residual(x_try_, r_try_, &ref_try);
-      if (n_try < best_norm) {
+      const double m_try = merit(n_try, x_try_);
+      if (m_try < best_merit) {
+        best_merit = m_try;
         best_norm = n_try;
         best_alpha = alpha;
       }
-      if (n_try <= (1.0 - 1e-4 * alpha) * norm || h == max_halvings) break;
+      if (m_try <= (1.0 - 1e-4 * alpha) * merit0 || h == max_halvings) break;
       alpha *= 0.5;
     }
     // None was good enough: take the best one tried.
@@ -423,13 +476,64 @@ StepResult LiverModel::step() {
     norm = best_norm;
     reference = ref_try;
   }
-  if (result.status != StepResult::Status::Diverged &&
-      solver_.mode == SolverOptions::Mode::Dynamic) {
-    v_ = (x_ - x_start_) / solver_.dt;
-    time_ += solver_.dt;
+}
+
+void LiverModel::set_sphere_probe(const Eigen::Vector3d& centre, double radius) {
+  if (!centre.allFinite() || !std::isfinite(radius) || radius <= 0)
+    throw std::invalid_argument("sphere probe: centre must be finite and radius > 0");
+  probe_ = SphereProbe{centre, radius};
+}
+
+void LiverModel::remove_sphere_probe() {
+  probe_.reset();
+  contact_nodes_.clear();
+  set_fixed(scene_fixed_nodes_);
+  update_probe_reaction();
+}
+
+void LiverModel::update_contacts() {
+  contact_nodes_.clear();
+  for (int i : boundary_nodes_) {
+    if (released_[i]) continue;
+    const Eigen::Vector3d d = x_.segment<3>(3 * i) - probe_->centre;
+    const double dist = d.norm();
+    // Nodes left on the surface by the previous step stay in contact (sticking).
+    if (dist >= probe_->radius * (1 + 1e-9)) continue;
+    const Eigen::Vector3d n = dist > 1e-12 * probe_->radius ? Eigen::Vector3d(d / dist) : Eigen::Vector3d::UnitZ();
+    target_.segment<3>(3 * i) = probe_->centre + probe_->radius * n;
+    contact_nodes_.push_back(i);
   }
-  result.timing.total_ms = ms_since(t_step);
-  return result;
+  std::vector<int> fixed = scene_fixed_nodes_;
+  fixed.insert(fixed.end(), contact_nodes_.begin(), contact_nodes_.end());
+  set_fixed(fixed);
+}
+
+bool LiverModel::release_tensile_contacts() {
+  double unused;
+  residual(x_, r_try_, &unused, /*zero_fixed=*/false);
+  bool released = false;
+  for (int i : contact_nodes_) {
+    // r = f_ext - f_int; the probe supplies -r. It can push the node outward, never pull it.
+    const Eigen::Vector3d n = (x_.segment<3>(3 * i) - probe_->centre).normalized();
+    if (r_try_.segment<3>(3 * i).dot(n) > 0) {
+      released_[i] = 1;
+      released = true;
+    }
+  }
+  return released;
+}
+
+void LiverModel::update_probe_reaction() {
+  probe_reaction_ = ProbeReaction{};
+  if (!probe_) return;
+  double unused;
+  residual(x_, r_try_, &unused, /*zero_fixed=*/false);
+  for (int i : contact_nodes_) {
+    const Eigen::Vector3d f = r_try_.segment<3>(3 * i);  // tissue on probe
+    probe_reaction_.force += f;
+    probe_reaction_.torque += (x_.segment<3>(3 * i) - probe_->centre).cross(f);
+  }
+  probe_reaction_.contacts = static_cast<int>(contact_nodes_.size());
 }
 
 }  // namespace liver_sim
