@@ -9,9 +9,14 @@ export PATH="/usr/bin:/bin:/usr/sbin:/sbin:$PATH"
 export ROS_HOME="$WS/ros_home" ROS_LOG_DIR="$WS/ros_home/log" ROS_IP=127.0.0.1
 
 PACKAGES=(
-  build-essential cmake catkin libroscpp-dev
+  build-essential cmake catkin libroscpp-dev ros-message-generation ros-message-runtime ros-std-msgs
+  libstd-msgs-dev libgeometry-msgs-dev libsensor-msgs-dev libvisualization-msgs-dev libstd-srvs-dev
+  libdiagnostic-msgs-dev libdiagnostic-updater-dev libtf2-dev libtf2-ros-dev libtf2-geometry-msgs-dev
+  libpcl-conversions-dev libpcl-dev
   libeigen3-dev libsuitesparse-dev libopenblas0-pthread libyaml-cpp-dev
-  libgtest-dev python3-matplotlib python3-numpy
+  libgtest-dev python3-rostest librostest-dev python3-roslaunch python3-rosmaster rosout
+  python3-rospy python3-rosbag python3-geometry-msgs python3-sensor-msgs python3-std-srvs
+  python3-visualization-msgs python3-matplotlib python3-numpy
 )
 
 install_missing_packages() {

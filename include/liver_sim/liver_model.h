@@ -66,8 +66,9 @@ class LiverModel {
   const CapsuleOptions& capsule() const { return capsule_; }
 
   // A rigid sphere probe (centre and radius in m) in sticking contact with the boundary: at each
-  // step the boundary nodes inside it are moved onto its surface and held there, and nodes the
-  // probe would have to pull are released (exact constraint forces, no penalty). Throws
+  // step the boundary nodes inside it are moved onto its surface (along their inward normal) and
+  // held there, and nodes the probe would have to pull are released (exact constraint forces,
+  // no penalty; the frictional NLCP contact of the instruments replaces it). Throws
   // std::invalid_argument for a non-finite centre or a radius <= 0.
   void set_sphere_probe(const Eigen::Vector3d& centre, double radius);
   void remove_sphere_probe();
@@ -153,6 +154,7 @@ class LiverModel {
   std::vector<double> damping_stiffness_;  // K at the start of a dynamic step (Rayleigh b K)
   std::vector<int> fixed_entries_;      // off-diagonal values in fixed rows/columns
   std::vector<int> scene_fixed_nodes_;
+  std::vector<char> fixed_by_scene_;  // per node
   std::vector<int> boundary_nodes_;
   struct SphereProbe {
     Eigen::Vector3d centre;
@@ -160,6 +162,7 @@ class LiverModel {
   };
   std::optional<SphereProbe> probe_;
   std::vector<int> contact_nodes_;
+  Eigen::VectorXd node_normal_;  // work vector of update_contacts
   std::vector<char> released_;  // per node, within the current step
   ProbeReaction probe_reaction_;
   std::vector<char> fixed_dof_;

@@ -106,6 +106,8 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
   if (fixed_nodes.empty() && solver_.mode == SolverOptions::Mode::Static)
     throw std::invalid_argument("fixed: a static scene needs fixed nodes (the stiffness matrix is singular otherwise)");
   scene_fixed_nodes_ = fixed_nodes;
+  fixed_by_scene_.assign(n, 0);
+  for (int i : fixed_nodes) fixed_by_scene_[i] = 1;
   set_fixed(fixed_nodes);
   for (int i = 0; i < n; ++i)
     if (on_boundary_[i]) boundary_nodes_.push_back(i);
@@ -232,9 +234,11 @@ int LiverModel::capsule_triangles() const {
 
 void LiverModel::reset() {
   x_ = X_;
+  target_ = X_;
   contact_nodes_.clear();
   set_fixed(scene_fixed_nodes_);
   probe_reaction_ = ProbeReaction{};
+  std::fill(released_.begin(), released_.end(), 0);
   v_.setZero();
   x_start_ = X_;
   time_ = 0;
@@ -342,7 +346,6 @@ StepResult LiverModel::step() {
   const auto t_step = Clock::now();
   StepResult result;
   x_start_ = x_;  // the last good state, restored if the step diverges
-  std::fill(released_.begin(), released_.end(), 0);
   // Sphere probe: constrain the penetrating nodes, solve, release the nodes the probe would have
   // to pull, solve again (a few active-set passes; the next step continues from there).
   for (int pass = 0;; ++pass) {
@@ -481,7 +484,11 @@ void LiverModel::newton(StepResult& result) {
 void LiverModel::set_sphere_probe(const Eigen::Vector3d& centre, double radius) {
   if (!centre.allFinite() || !std::isfinite(radius) || radius <= 0)
     throw std::invalid_argument("sphere probe: centre must be finite and radius > 0");
+  if (probe_ && probe_->centre == centre && probe_->radius == radius) return;
   probe_ = SphereProbe{centre, radius};
+  // Released nodes stay free until the probe moves: without it a node that the probe would have
+  // to pull can cycle between contact and release from one step to the next.
+  std::fill(released_.begin(), released_.end(), 0);
 }
 
 void LiverModel::remove_sphere_probe() {
@@ -492,15 +499,32 @@ void LiverModel::remove_sphere_probe() {
 }
 
 void LiverModel::update_contacts() {
+  // Outward vertex normals of the current surface (area-weighted).
+  node_normal_.setZero(x_.size());
+  for (int f = 0; f < boundary_.rows(); ++f) {
+    const int a = boundary_(f, 0), b = boundary_(f, 1), c = boundary_(f, 2);
+    const Eigen::Vector3d area = (x_.segment<3>(3 * b) - x_.segment<3>(3 * a)).cross(x_.segment<3>(3 * c) - x_.segment<3>(3 * a));
+    for (int k : {a, b, c}) node_normal_.segment<3>(3 * k) += area;
+  }
   contact_nodes_.clear();
+  const double r = probe_->radius;
   for (int i : boundary_nodes_) {
-    if (released_[i]) continue;
-    const Eigen::Vector3d d = x_.segment<3>(3 * i) - probe_->centre;
+    if (released_[i] || fixed_by_scene_[i]) continue;  // the scene holds those already
+    const Eigen::Vector3d x = x_.segment<3>(3 * i);
+    const Eigen::Vector3d d = x - probe_->centre;
     const double dist = d.norm();
-    // Nodes left on the surface by the previous step stay in contact (sticking).
-    if (dist >= probe_->radius * (1 + 1e-9)) continue;
-    const Eigen::Vector3d n = dist > 1e-12 * probe_->radius ? Eigen::Vector3d(d / dist) : Eigen::Vector3d::UnitZ();
-    target_.segment<3>(3 * i) = probe_->centre + probe_->radius * n;
+    if (dist >= r * (1 + 1e-9)) continue;
+    if (dist > r * (1 - 1e-9)) {
+      target_.segment<3>(3 * i) = x;  // on the surface since the last step: it sticks
+    } else {
+      // Inside: push the node into the tissue (against its outward normal) to where that line
+      // leaves the sphere, as the probe would have carried it on its way in. A radial projection
+      // would pull nodes above the centre of a deep probe out of the tissue.
+      const Eigen::Vector3d n = node_normal_.segment<3>(3 * i).normalized();
+      const double b = n.dot(d);  // |d - t n| = r
+      const double t = b + std::sqrt(b * b + r * r - dist * dist);
+      target_.segment<3>(3 * i) = x - t * n;
+    }
     contact_nodes_.push_back(i);
   }
   std::vector<int> fixed = scene_fixed_nodes_;

@@ -1,0 +1,377 @@
+// liver_sim_node: hosts the liver model in an OR guidance stack. Callbacks only validate and
+// store the latest input; the simulation loop (main thread) owns the model, steps it at ~rate
+// when there is something to do, and publishes.
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <geometry_msgs/PoseStamped.h>
+#include <geometry_msgs/WrenchStamped.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+#include <pcl_conversions/pcl_conversions.h>
+#include <ros/ros.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <std_srvs/Trigger.h>
+#include <tf2_geometry_msgs/tf2_geometry_msgs.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
+#include <visualization_msgs/Marker.h>
+
+#include <cmath>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <sstream>
+
+#include "liver_sim/InstrumentCommand.h"
+#include "liver_sim/SetCapsule.h"
+#include "liver_sim/SimulationStatus.h"
+#include "liver_sim/liver_model.h"
+#include "mesh_marker.h"
+
+namespace liver_sim {
+namespace {
+
+std::string scalar_text(const XmlRpc::XmlRpcValue& v) {
+  std::ostringstream s;
+  s.precision(17);
+  switch (v.getType()) {
+    case XmlRpc::XmlRpcValue::TypeBoolean: s << (static_cast<bool>(const_cast<XmlRpc::XmlRpcValue&>(v)) ? "true" : "false"); break;
+    case XmlRpc::XmlRpcValue::TypeInt: s << static_cast<int>(const_cast<XmlRpc::XmlRpcValue&>(v)); break;
+    case XmlRpc::XmlRpcValue::TypeDouble: s << static_cast<double>(const_cast<XmlRpc::XmlRpcValue&>(v)); break;
+    case XmlRpc::XmlRpcValue::TypeString: s << static_cast<std::string>(const_cast<XmlRpc::XmlRpcValue&>(v)); break;
+    default: throw std::invalid_argument("only scalar parameters can override scene values");
+  }
+  return s.str();
+}
+
+bool finite(const geometry_msgs::Pose& p) {
+  return std::isfinite(p.position.x) && std::isfinite(p.position.y) && std::isfinite(p.position.z) &&
+         std::isfinite(p.orientation.x) && std::isfinite(p.orientation.y) && std::isfinite(p.orientation.z) &&
+         std::isfinite(p.orientation.w);
+}
+
+}  // namespace
+
+class LiverSimNode {
+ public:
+  LiverSimNode(ros::NodeHandle& nh, ros::NodeHandle& pnh) : tf_listener_(tf_buffer_), updater_(nh, pnh) {
+    std::string scene_path;
+    pnh.param<std::string>("scene", scene_path, LIVER_SIM_DEFAULT_SCENE);
+    pnh.param<std::string>("frame_id", frame_id_, "liver");
+    pnh.param("rate", rate_, 30.0);
+    pnh.param("publish_rate", publish_rate_, 15.0);
+    pnh.param("instrument_radius", probe_radius_, 0.003);
+    pnh.param("color_scale_max", color_scale_max_, 0.005);
+    pnh.param("instrument_frames", instrument_frames_, std::vector<std::string>{});
+    if (!(rate_ > 0) || !(publish_rate_ > 0) || !(probe_radius_ > 0) || !(color_scale_max_ > 0))
+      throw std::invalid_argument("~rate, ~publish_rate, ~instrument_radius and ~color_scale_max must be > 0");
+    // ~parenchyma/*, ~capsule/*, ~solver/* override the scalars of the scene file.
+    std::vector<std::string> overrides;
+    for (const char* section : {"parenchyma", "capsule", "solver"}) {
+      XmlRpc::XmlRpcValue values;
+      if (!pnh.getParam(section, values)) continue;
+      if (values.getType() != XmlRpc::XmlRpcValue::TypeStruct)
+        throw std::invalid_argument(std::string("~") + section + " must be a map of scalars");
+      for (auto& kv : values) overrides.push_back(std::string(section) + "." + kv.first + "=" + scalar_text(kv.second));
+    }
+    const Scene scene = load_scene(scene_path, overrides);
+    try {
+      model_ = std::make_unique<LiverModel>(load_scene_mesh(scene), scene);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(scene_path + ": " + e.what());
+    }
+    capsule_ = scene.capsule;
+    ROS_INFO("liver_sim: %s: %ld nodes, %ld tetrahedra, %d capsule triangles, %s mode", scene_path.c_str(),
+             static_cast<long>(model_->mesh().V.rows()), static_cast<long>(model_->mesh().T.rows()),
+             model_->capsule_triangles(), scene.solver.mode == SolverOptions::Mode::Static ? "static" : "dynamic");
+
+    mesh_pub_ = pnh.advertise<visualization_msgs::Marker>("mesh", 1, true);
+    status_pub_ = pnh.advertise<SimulationStatus>("status", 10);
+    wrench_pub_ = pnh.advertise<geometry_msgs::WrenchStamped>("wrench", 10);
+    pose_sub_ = nh.subscribe("instrument_pose", 1, &LiverSimNode::on_pose, this);
+    command_sub_ = nh.subscribe("instrument_command", 10, &LiverSimNode::on_command, this);
+    cloud_sub_ = nh.subscribe("points", 1, &LiverSimNode::on_cloud, this);
+    reset_srv_ = pnh.advertiseService("reset", &LiverSimNode::on_reset, this);
+    capsule_srv_ = pnh.advertiseService("set_capsule", &LiverSimNode::on_set_capsule, this);
+    updater_.setHardwareID("liver_sim");
+    updater_.add("liver model", this, &LiverSimNode::diagnose);
+  }
+
+  void run() {
+    ros::WallRate loop(rate_);
+    const ros::WallDuration publish_period(1.0 / publish_rate_);
+    ros::WallTime next_publish = ros::WallTime::now();
+    bool must_step = true;  // the first step brings the scene's loads to equilibrium
+    while (ros::ok()) {
+      must_step |= apply_inputs();
+      if (must_step) {
+        const StepResult r = model_->step();
+        ++steps_;
+        last_ = r;
+        // Continue next frame while iterating; a diverged step waits for new input.
+        must_step = r.status == StepResult::Status::NotConverged ||
+                    (r.converged() && r.iterations > 0);
+        state_ = r.status == StepResult::Status::Diverged ? "diverged"
+                 : r.converged()                            ? "converged"
+                                                            : "iterating";
+        if (r.status == StepResult::Status::Diverged)
+          ROS_WARN_THROTTLE(1.0, "liver_sim: step diverged (%s); kept the last good state", r.message.c_str());
+        publish_status(r);
+      } else {
+        state_ = state_ == "diverged" ? state_ : "idle";
+      }
+      frame_times_.push_back(ros::WallTime::now());
+      while (frame_times_.front() < frame_times_.back() - ros::WallDuration(1.0)) frame_times_.pop_front();
+      const ros::WallTime now = ros::WallTime::now();
+      if (now >= next_publish) {
+        publish_mesh();
+        if (!must_step) publish_status(last_);
+        next_publish += publish_period;
+        if (next_publish < now) next_publish = now + publish_period;  // fell behind: no burst
+      }
+      updater_.update();
+      loop.sleep();
+    }
+  }
+
+ private:
+  // Moves pending inputs into the model; true when something changed.
+  bool apply_inputs() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    bool changed = false;
+    if (reset_requested_) {
+      model_->reset();
+      model_->remove_sphere_probe();
+      probe_centre_.reset();
+      pose_changed_ = false;
+      reset_requested_ = false;
+      steps_ = 0;
+      changed = true;
+    }
+    if (pending_capsule_) {
+      const std::string error = model_->set_capsule(*pending_capsule_);  // validated already
+      if (error.empty()) capsule_ = *pending_capsule_;
+      else ROS_ERROR("liver_sim: capsule change failed: %s", error.c_str());
+      pending_capsule_.reset();
+      changed = true;
+    }
+    for (const std::string& frame : instrument_frames_) lookup_instrument_frame(frame);
+    if (probe_removed_) {
+      model_->remove_sphere_probe();
+      probe_centre_.reset();
+      probe_removed_ = false;
+      changed = true;
+    }
+    if (pose_changed_ && probe_centre_) {
+      model_->set_sphere_probe(*probe_centre_, probe_radius_);
+      reflected_stamp_ = pose_stamp_;
+      pose_changed_ = false;
+      changed = true;
+    }
+    return changed;
+  }
+
+  // Instruments tracked through tf: the frame origin is the probe tip centre. (mutex held)
+  void lookup_instrument_frame(const std::string& frame) {
+    try {
+      const geometry_msgs::TransformStamped t = tf_buffer_.lookupTransform(frame_id_, frame, ros::Time(0));
+      const Eigen::Vector3d c(t.transform.translation.x, t.transform.translation.y, t.transform.translation.z);
+      if (!c.allFinite()) return reject("non-finite transform of " + frame);
+      if (!probe_centre_ || (*probe_centre_ - c).norm() > 1e-9) {
+        probe_centre_ = c;
+        pose_stamp_ = t.header.stamp;
+        pose_changed_ = true;
+      }
+    } catch (const tf2::TransformException& e) {
+      ROS_WARN_THROTTLE(5.0, "liver_sim: instrument frame %s: %s", frame.c_str(), e.what());
+    }
+  }
+
+  void reject(const std::string& why) {  // mutex held
+    ++rejected_;
+    last_rejection_ = why;
+    ROS_WARN_THROTTLE(1.0, "liver_sim: refused input: %s", why.c_str());
+  }
+
+  void on_pose(const geometry_msgs::PoseStamped::ConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!finite(msg->pose)) return reject("instrument_pose with NaN or infinite values");
+    geometry_msgs::PoseStamped p = *msg;
+    if (!p.header.frame_id.empty() && p.header.frame_id != frame_id_) {
+      try {
+        p = tf_buffer_.transform(*msg, frame_id_, ros::Duration(0.0));
+      } catch (const tf2::TransformException& e) {
+        return reject("instrument_pose in frame '" + msg->header.frame_id + "': " + e.what());
+      }
+    }
+    probe_centre_ = Eigen::Vector3d(p.pose.position.x, p.pose.position.y, p.pose.position.z);
+    pose_stamp_ = msg->header.stamp;
+    pose_changed_ = true;
+  }
+
+  void on_command(const InstrumentCommand::ConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (msg->type != "probe")
+      return reject("instrument type '" + msg->type + "' is not available yet (probe only)");
+    if (msg->remove) {
+      probe_removed_ = true;
+      return;
+    }
+    if (!std::isfinite(msg->radius) || msg->radius < 0) return reject("instrument radius must be finite and >= 0");
+    if (msg->radius > 0) {
+      probe_radius_ = msg->radius;
+      pose_changed_ = probe_centre_.has_value();
+    }
+  }
+
+  void on_cloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    auto cloud = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+    try {
+      pcl::fromROSMsg(*msg, *cloud);
+    } catch (const std::exception& e) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      return reject(std::string("points: ") + e.what());
+    }
+    size_t finite_points = 0;
+    for (const auto& p : cloud->points) finite_points += std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (finite_points == 0) return reject("points: empty cloud or no finite point");
+    latest_cloud_ = std::move(cloud);  // kept for registration; replaced, never queued
+    ++clouds_;
+  }
+
+  bool on_reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    reset_requested_ = true;
+    res.success = true;
+    res.message = "back to the rest shape at the next step; instruments released until their next pose";
+    return true;
+  }
+
+  bool on_set_capsule(SetCapsule::Request& req, SetCapsule::Response& res) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    CapsuleOptions c = pending_capsule_ ? *pending_capsule_ : capsule_;
+    c.enabled = req.enabled;
+    c.young_modulus = req.young_modulus;
+    c.thickness = req.thickness;
+    c.poisson_ratio = req.poisson_ratio;
+    res.message = validate(c);
+    res.success = res.message.empty();
+    if (!res.success) {
+      reject("set_capsule: " + res.message);
+      return true;
+    }
+    pending_capsule_ = c;
+    res.message = "applied at the next step";
+    return true;
+  }
+
+  void publish_status(const StepResult& r) {
+    SimulationStatus s;
+    s.header.stamp = ros::Time::now();
+    s.header.frame_id = frame_id_;
+    s.step = steps_;
+    s.rate = frame_times_.size() > 1 ? (frame_times_.size() - 1) / (frame_times_.back() - frame_times_.front()).toSec() : 0.0;
+    s.step_time = r.timing.total_ms / 1000.0;
+    s.iterations = r.iterations;
+    s.residual = r.residual;
+    const Eigen::VectorXd u = model_->displacement();
+    double max_u = 0;
+    for (int i = 0; i < u.size(); i += 3) max_u = std::max(max_u, u.segment<3>(i).norm());
+    s.max_displacement = max_u;
+    s.active_contacts = model_->probe_reaction().contacts;
+    s.state = state_;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      s.rejected_inputs = rejected_;
+      s.text = r.message.empty() ? last_rejection_ : r.message;
+    }
+    status_pub_.publish(s);
+
+    geometry_msgs::WrenchStamped w;
+    w.header = s.header;
+    const auto& reaction = model_->probe_reaction();
+    w.wrench.force.x = reaction.force.x();
+    w.wrench.force.y = reaction.force.y();
+    w.wrench.force.z = reaction.force.z();
+    w.wrench.torque.x = reaction.torque.x();
+    w.wrench.torque.y = reaction.torque.y();
+    w.wrench.torque.z = reaction.torque.z();
+    wrench_pub_.publish(w);
+  }
+
+  void publish_mesh() {
+    marker_.header.frame_id = frame_id_;
+    // The stamp of the instrument pose the shape reflects, so that latency can be measured.
+    marker_.header.stamp = reflected_stamp_.isZero() ? ros::Time::now() : reflected_stamp_;
+    marker_.ns = "liver";
+    marker_.id = 0;
+    fill_mesh_marker(*model_, color_scale_max_, marker_);
+    mesh_pub_.publish(marker_);
+  }
+
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
+    using diagnostic_msgs::DiagnosticStatus;
+    const unsigned char level = state_ == "diverged" ? DiagnosticStatus::ERROR
+                                : state_ == "iterating" ? DiagnosticStatus::WARN
+                                                        : DiagnosticStatus::OK;
+    stat.summary(level, state_);
+    stat.add("steps", steps_);
+    stat.add("last step time (s)", last_.timing.total_ms / 1000.0);
+    stat.add("residual", last_.residual);
+    stat.add("active contacts", model_->probe_reaction().contacts);
+    std::lock_guard<std::mutex> lock(mutex_);
+    stat.add("rejected inputs", rejected_);
+    stat.add("point clouds received", clouds_);
+    stat.add("last rejection", last_rejection_);
+  }
+
+  tf2_ros::Buffer tf_buffer_;
+  tf2_ros::TransformListener tf_listener_;
+  diagnostic_updater::Updater updater_;
+  std::unique_ptr<LiverModel> model_;
+  std::string frame_id_;
+  double rate_, publish_rate_, probe_radius_, color_scale_max_;
+  std::vector<std::string> instrument_frames_;
+  ros::Publisher mesh_pub_, status_pub_, wrench_pub_;
+  ros::Subscriber pose_sub_, command_sub_, cloud_sub_;
+  ros::ServiceServer reset_srv_, capsule_srv_;
+  visualization_msgs::Marker marker_;
+
+  // Simulation thread only.
+  StepResult last_;
+  uint64_t steps_ = 0;
+  std::string state_ = "idle";
+  std::deque<ros::WallTime> frame_times_;
+  ros::Time reflected_stamp_;
+
+  // Shared with callbacks, under mutex_.
+  std::mutex mutex_;
+  std::optional<Eigen::Vector3d> probe_centre_;
+  ros::Time pose_stamp_;
+  bool pose_changed_ = false, probe_removed_ = false, reset_requested_ = false;
+  std::optional<CapsuleOptions> pending_capsule_;
+  CapsuleOptions capsule_;  // as applied to the model
+  pcl::PointCloud<pcl::PointXYZ>::ConstPtr latest_cloud_;
+  uint32_t rejected_ = 0;
+  uint64_t clouds_ = 0;
+  std::string last_rejection_;
+};
+
+}  // namespace liver_sim
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "liver_sim");
+  ros::NodeHandle nh, pnh("~");
+  std::unique_ptr<liver_sim::LiverSimNode> node;
+  try {
+    node = std::make_unique<liver_sim::LiverSimNode>(nh, pnh);
+  } catch (const std::exception& e) {
+    ROS_FATAL("liver_sim: %s", e.what());
+    return 1;
+  }
+  ros::AsyncSpinner spinner(2);  // callbacks and services run beside the simulation loop
+  spinner.start();
+  node->run();
+  return 0;
+}

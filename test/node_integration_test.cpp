@@ -1,0 +1,211 @@
+// Integration test of liver_sim_node on a real ROS master (rostest test/liver_sim_node.test),
+// on the default OR scene (the aspiration cube). The tests run in order and share the node.
+#include <geometry_msgs/PoseStamped.h>
+#include <geometry_msgs/WrenchStamped.h>
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
+#include <std_srvs/Trigger.h>
+#include <visualization_msgs/Marker.h>
+
+#include <cmath>
+#include <functional>
+
+#include "liver_sim/SetCapsule.h"
+#include "liver_sim/SimulationStatus.h"
+
+namespace {
+
+class Node : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    nh_ = std::make_unique<ros::NodeHandle>();
+    status_sub_ = nh_->subscribe("liver_sim/status", 10, &Node::on_status);
+    wrench_sub_ = nh_->subscribe("liver_sim/wrench", 10, &Node::on_wrench);
+    mesh_sub_ = nh_->subscribe("liver_sim/mesh", 10, &Node::on_mesh);
+    pose_pub_ = nh_->advertise<geometry_msgs::PoseStamped>("instrument_pose", 1);
+    cloud_pub_ = nh_->advertise<sensor_msgs::PointCloud2>("points", 1);
+    ASSERT_TRUE(wait_for([] { return status_count_ > 0 && mesh_count_ > 0 && pose_pub_.getNumSubscribers() > 0; }, 30.0))
+        << "no status or mesh from liver_sim";
+  }
+  static void TearDownTestSuite() { nh_.reset(); }
+  static void on_status(const liver_sim::SimulationStatus::ConstPtr& m) {
+    status_ = *m;
+    ++status_count_;
+  }
+  static void on_wrench(const geometry_msgs::WrenchStamped::ConstPtr& m) { wrench_ = *m; }
+  static void on_mesh(const visualization_msgs::Marker::ConstPtr& m) {
+    mesh_ = *m;
+    ++mesh_count_;
+  }
+
+  // Spins until pred holds or `seconds` of wall time pass.
+  static bool wait_for(const std::function<bool()>& pred, double seconds) {
+    const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(seconds);
+    while (ros::ok() && ros::WallTime::now() < end) {
+      ros::spinOnce();
+      if (pred()) return true;
+      ros::WallDuration(0.01).sleep();
+    }
+    return false;
+  }
+
+  // Waits for the model to settle after an input sent at `sent`: an idle status stamped well
+  // after it (one frame of the 30 Hz loop applies an input; statuses still queued from before
+  // must not count).
+  static liver_sim::SimulationStatus settled(ros::Time sent = ros::Time::now()) {
+    const ros::Time after = sent + ros::Duration(0.15);
+    EXPECT_TRUE(wait_for([&] { return status_.header.stamp > after && status_.state == "idle"; }, 20.0))
+        << "state " << status_.state;
+    return status_;
+  }
+
+  static void publish_pose(double x, double y, double z, const std::string& frame = "liver") {
+    geometry_msgs::PoseStamped p;
+    p.header.frame_id = frame;
+    p.header.stamp = ros::Time::now();
+    p.pose.position.x = x;
+    p.pose.position.y = y;
+    p.pose.position.z = z;
+    p.pose.orientation.w = 1;
+    pose_pub_.publish(p);
+  }
+
+  static liver_sim::SetCapsule::Response set_capsule(bool enabled, double E, double h, double nu) {
+    liver_sim::SetCapsule srv;
+    srv.request.enabled = enabled;
+    srv.request.young_modulus = E;
+    srv.request.thickness = h;
+    srv.request.poisson_ratio = nu;
+    EXPECT_TRUE(ros::service::call("liver_sim/set_capsule", srv));
+    return srv.response;
+  }
+
+  static std::unique_ptr<ros::NodeHandle> nh_;
+  static ros::Subscriber status_sub_, wrench_sub_, mesh_sub_;
+  static ros::Publisher pose_pub_, cloud_pub_;
+  static liver_sim::SimulationStatus status_;
+  static geometry_msgs::WrenchStamped wrench_;
+  static visualization_msgs::Marker mesh_;
+  static unsigned status_count_, mesh_count_;
+};
+
+std::unique_ptr<ros::NodeHandle> Node::nh_;
+ros::Subscriber Node::status_sub_, Node::wrench_sub_, Node::mesh_sub_;
+ros::Publisher Node::pose_pub_, Node::cloud_pub_;
+liver_sim::SimulationStatus Node::status_;
+geometry_msgs::WrenchStamped Node::wrench_;
+visualization_msgs::Marker Node::mesh_;
+unsigned Node::status_count_ = 0, Node::mesh_count_ = 0;
+
+// ~publish_rate is 15 Hz in the test launch. A loose band: this checks that the mesh flows
+// periodically at about the set rate, not how fast the machine is.
+TEST_F(Node, PublishesTheDeformedMeshAtTheSetRate) {
+  const unsigned before = mesh_count_;
+  const ros::WallTime start = ros::WallTime::now();
+  wait_for([] { return false; }, 2.0);
+  const double rate = (mesh_count_ - before) / (ros::WallTime::now() - start).toSec();
+  EXPECT_GT(rate, 7.5);
+  EXPECT_LT(rate, 22.5);
+  EXPECT_EQ(mesh_.type, visualization_msgs::Marker::TRIANGLE_LIST);
+  EXPECT_EQ(mesh_.header.frame_id, "liver");
+  EXPECT_EQ(mesh_.points.size(), 3u * 768u);  // the cube's boundary triangles
+  EXPECT_EQ(mesh_.colors.size(), mesh_.points.size());
+  const liver_sim::SimulationStatus s = settled();
+  EXPECT_EQ(s.state, "idle");
+  EXPECT_NEAR(s.max_displacement, 1.375e-3, 0.01e-3) << "the aspiration test at equilibrium";
+}
+
+// Without its capsule the tissue lifts more under the same suction; invalid values are refused
+// and change nothing.
+TEST_F(Node, SetCapsuleChangesDisplacementAndRefusesInvalidValues) {
+  const double with_capsule = settled().max_displacement;
+  ros::Time sent = ros::Time::now();
+  EXPECT_TRUE(set_capsule(false, 8.22e6, 20e-6, 0.45).success);
+  const double without = settled(sent).max_displacement;
+  EXPECT_GT(without, 2.0 * with_capsule);
+
+  const unsigned rejected = status_.rejected_inputs;
+  sent = ros::Time::now();
+  EXPECT_FALSE(set_capsule(true, -1.0, 20e-6, 0.45).success);
+  EXPECT_FALSE(set_capsule(true, 8e6, 0.0, 0.45).success);
+  EXPECT_FALSE(set_capsule(true, 8e6, 20e-6, 0.5).success);
+  const liver_sim::SetCapsule::Response nan = set_capsule(true, std::nan(""), 20e-6, 0.45);
+  EXPECT_FALSE(nan.success);
+  EXPECT_NE(nan.message.find("young_modulus"), std::string::npos) << nan.message;
+  const liver_sim::SimulationStatus after = settled(sent);
+  EXPECT_DOUBLE_EQ(after.max_displacement, without) << "a refused request changed the model";
+  EXPECT_EQ(after.rejected_inputs, rejected + 4);
+
+  sent = ros::Time::now();
+  EXPECT_TRUE(set_capsule(true, 8.22e6, 20e-6, 0.45).success);
+  EXPECT_NEAR(settled(sent).max_displacement, with_capsule, 1e-9);
+}
+
+// A probe pushed 4 mm into the top face, away from the tube: the surface under it moves more
+// than the suction lifts the centre, and the tissue pushes back on the probe.
+TEST_F(Node, ProbePushedIntoTissueRaisesDisplacementAndWrench) {
+  const double before = settled().max_displacement;
+  const double r = 0.003;  // ~instrument_radius
+  const ros::Time sent = ros::Time::now();
+  publish_pose(0.003, 0.003, 0.015 + r - 0.004);
+  const liver_sim::SimulationStatus s = settled(sent);
+  EXPECT_GT(s.active_contacts, 0);
+  EXPECT_GT(s.max_displacement, before);
+  EXPECT_GT(s.max_displacement, 3.0e-3) << "nodes under the probe follow it about 3.5 mm down";
+  wait_for([] { return false; }, 0.3);
+  EXPECT_GT(wrench_.wrench.force.z, 1e-3) << "the tissue pushes the probe up";
+}
+
+TEST_F(Node, ResetRestoresTheRestShapeAndReleasesInstruments) {
+  std_srvs::Trigger reset;
+  const ros::Time sent = ros::Time::now();
+  ASSERT_TRUE(ros::service::call("liver_sim/reset", reset));
+  EXPECT_TRUE(reset.response.success);
+  const liver_sim::SimulationStatus s = settled(sent);
+  EXPECT_EQ(s.active_contacts, 0);
+  // From the rest shape the scene's suction acts again: the same equilibrium as at start.
+  EXPECT_NEAR(s.max_displacement, 1.375e-3, 0.01e-3);
+  wait_for([] { return false; }, 0.3);
+  EXPECT_EQ(wrench_.wrench.force.z, 0.0);
+}
+
+TEST_F(Node, MalformedInputIsRefusedAndCountedWhileTheNodeRuns) {
+  const liver_sim::SimulationStatus before = settled();
+  // One at a time: the node keeps only the latest message of a topic, by design.
+  auto refused = [&](unsigned n) {
+    return wait_for([&] { return status_.rejected_inputs >= before.rejected_inputs + n; }, 10.0);
+  };
+  publish_pose(std::nan(""), 0.0, 0.01);
+  ASSERT_TRUE(refused(1)) << "NaN pose: " << status_.text;
+  publish_pose(0.0075, 0.0075, 0.02, "no_such_frame");
+  ASSERT_TRUE(refused(2)) << "unknown frame: " << status_.text;
+  EXPECT_NE(status_.text.find("no_such_frame"), std::string::npos) << status_.text;
+  sensor_msgs::PointCloud2 empty;
+  empty.header.frame_id = "liver";
+  sensor_msgs::PointCloud2Modifier(empty).setPointCloud2FieldsByString(1, "xyz");
+  cloud_pub_.publish(empty);
+  ASSERT_TRUE(refused(3)) << "empty cloud: " << status_.text;
+  // A valid cloud is taken and not counted as refused.
+  sensor_msgs::PointCloud2 cloud;
+  cloud.header.frame_id = "liver";
+  sensor_msgs::PointCloud2Modifier mod(cloud);
+  mod.setPointCloud2FieldsByString(1, "xyz");
+  mod.resize(10);
+  sensor_msgs::PointCloud2Iterator<float> x(cloud, "x");
+  for (int i = 0; i < 10; ++i, ++x) x[0] = x[1] = x[2] = 0.001f * i;
+  cloud_pub_.publish(cloud);
+  const unsigned count = status_count_;
+  ASSERT_TRUE(wait_for([&] { return status_count_ > count + 5; }, 10.0)) << "status stopped flowing";
+  EXPECT_EQ(status_.rejected_inputs, before.rejected_inputs + 3);
+  EXPECT_NEAR(status_.max_displacement, before.max_displacement, 1e-12) << "refused input changed the model";
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "liver_sim_node_test");
+  return RUN_ALL_TESTS();
+}
