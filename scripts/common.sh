@@ -34,7 +34,15 @@ install_missing_packages() {
 
 build_workspace() {
   mkdir -p "$WS/src" "$ROS_LOG_DIR"
-  [ -L "$WS/src/liver_sim" ] || ln -s ../../.. "$WS/src/liver_sim"
+  # The package in the workspace: a folder of links to the repository's top-level entries, all
+  # but build/ (a link to the repository itself would loop through build/ws/src, and roslaunch
+  # and rosrun walk package folders following links).
+  [ -L "$WS/src/liver_sim" ] && rm "$WS/src/liver_sim"
+  mkdir -p "$WS/src/liver_sim"
+  for entry in "$REPO"/* "$REPO"/.ci; do
+    name=$(basename "$entry")
+    [ "$name" = build ] || ln -sfn "$entry" "$WS/src/liver_sim/$name"
+  done
   # Python test nodes need this path in the cached PYTHONPATH of the first configure.
   mkdir -p "$WS/devel/lib/python3/dist-packages"
   (cd "$WS" && catkin_make -j2 -DCMAKE_BUILD_TYPE=Release \

@@ -86,6 +86,7 @@ class LiverSimNode {
              model_->capsule_triangles(), scene.solver.mode == SolverOptions::Mode::Static ? "static" : "dynamic");
 
     mesh_pub_ = pnh.advertise<visualization_msgs::Marker>("mesh", 1, true);
+    instrument_pub_ = pnh.advertise<visualization_msgs::Marker>("instruments", 1, true);
     status_pub_ = pnh.advertise<SimulationStatus>("status", 10);
     wrench_pub_ = pnh.advertise<geometry_msgs::WrenchStamped>("wrench", 10);
     pose_sub_ = nh.subscribe("instrument_pose", 1, &LiverSimNode::on_pose, this);
@@ -308,6 +309,24 @@ class LiverSimNode {
     marker_.id = 0;
     fill_mesh_marker(*model_, color_scale_max_, marker_);
     mesh_pub_.publish(marker_);
+
+    // The probe tip as a translucent sphere (deleted when there is no probe).
+    visualization_msgs::Marker tip;
+    tip.header = marker_.header;
+    tip.ns = "instruments";
+    tip.type = visualization_msgs::Marker::SPHERE;
+    std::lock_guard<std::mutex> lock(mutex_);
+    tip.action = probe_centre_ ? visualization_msgs::Marker::ADD : visualization_msgs::Marker::DELETE;
+    if (probe_centre_) {
+      tip.pose.position.x = probe_centre_->x();
+      tip.pose.position.y = probe_centre_->y();
+      tip.pose.position.z = probe_centre_->z();
+    }
+    tip.pose.orientation.w = 1;
+    tip.scale.x = tip.scale.y = tip.scale.z = 2 * probe_radius_;
+    tip.color.r = tip.color.g = tip.color.b = 0.8f;
+    tip.color.a = 0.6f;
+    instrument_pub_.publish(tip);
   }
 
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
@@ -333,7 +352,7 @@ class LiverSimNode {
   std::string frame_id_;
   double rate_, publish_rate_, probe_radius_, color_scale_max_;
   std::vector<std::string> instrument_frames_;
-  ros::Publisher mesh_pub_, status_pub_, wrench_pub_;
+  ros::Publisher mesh_pub_, instrument_pub_, status_pub_, wrench_pub_;
   ros::Subscriber pose_sub_, command_sub_, cloud_sub_;
   ros::ServiceServer reset_srv_, capsule_srv_;
   visualization_msgs::Marker marker_;
