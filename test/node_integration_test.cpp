@@ -7,6 +7,7 @@
 #include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <std_srvs/Trigger.h>
+#include <tf2_ros/static_transform_broadcaster.h>
 #include <visualization_msgs/Marker.h>
 
 #include <cmath>
@@ -25,11 +26,23 @@ class Node : public ::testing::Test {
     wrench_sub_ = nh_->subscribe("liver_sim/wrench", 10, &Node::on_wrench);
     mesh_sub_ = nh_->subscribe("liver_sim/mesh", 10, &Node::on_mesh);
     pose_pub_ = nh_->advertise<geometry_msgs::PoseStamped>("instrument_pose", 1);
+    // A camera frame 10 cm along x from the model frame, for poses sent in another frame.
+    tf_broadcaster_ = std::make_unique<tf2_ros::StaticTransformBroadcaster>();
+    geometry_msgs::TransformStamped camera;
+    camera.header.stamp = ros::Time::now();
+    camera.header.frame_id = "liver";
+    camera.child_frame_id = "camera";
+    camera.transform.translation.x = 0.1;
+    camera.transform.rotation.w = 1.0;
+    tf_broadcaster_->sendTransform(camera);
     cloud_pub_ = nh_->advertise<sensor_msgs::PointCloud2>("points", 1);
     ASSERT_TRUE(wait_for([] { return status_count_ > 0 && mesh_count_ > 0 && pose_pub_.getNumSubscribers() > 0; }, 30.0))
         << "no status or mesh from liver_sim";
   }
-  static void TearDownTestSuite() { nh_.reset(); }
+  static void TearDownTestSuite() {
+    tf_broadcaster_.reset();
+    nh_.reset();
+  }
   static void on_status(const liver_sim::SimulationStatus::ConstPtr& m) {
     status_ = *m;
     ++status_count_;
@@ -83,6 +96,7 @@ class Node : public ::testing::Test {
   }
 
   static std::unique_ptr<ros::NodeHandle> nh_;
+  static std::unique_ptr<tf2_ros::StaticTransformBroadcaster> tf_broadcaster_;
   static ros::Subscriber status_sub_, wrench_sub_, mesh_sub_;
   static ros::Publisher pose_pub_, cloud_pub_;
   static liver_sim::SimulationStatus status_;
@@ -92,6 +106,7 @@ class Node : public ::testing::Test {
 };
 
 std::unique_ptr<ros::NodeHandle> Node::nh_;
+std::unique_ptr<tf2_ros::StaticTransformBroadcaster> Node::tf_broadcaster_;
 ros::Subscriber Node::status_sub_, Node::wrench_sub_, Node::mesh_sub_;
 ros::Publisher Node::pose_pub_, Node::cloud_pub_;
 liver_sim::SimulationStatus Node::status_;
@@ -144,12 +159,13 @@ TEST_F(Node, SetCapsuleChangesDisplacementAndRefusesInvalidValues) {
 }
 
 // A probe pushed 4 mm into the top face, away from the tube: the surface under it moves more
-// than the suction lifts the centre, and the tissue pushes back on the probe.
+// than the suction lifts the centre, and the tissue pushes back on the probe. The pose comes in
+// the camera frame and is transformed with tf2.
 TEST_F(Node, ProbePushedIntoTissueRaisesDisplacementAndWrench) {
   const double before = settled().max_displacement;
   const double r = 0.003;  // ~instrument_radius
   const ros::Time sent = ros::Time::now();
-  publish_pose(0.003, 0.003, 0.015 + r - 0.004);
+  publish_pose(0.003 - 0.1, 0.003, 0.015 + r - 0.004, "camera");
   const liver_sim::SimulationStatus s = settled(sent);
   EXPECT_GT(s.active_contacts, 0);
   EXPECT_GT(s.max_displacement, before);
