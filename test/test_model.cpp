@@ -228,6 +228,20 @@ TEST_F(Aspiration, DampedDynamicsSettlesOnStaticSolution) {
   EXPECT_NEAR(m.time(), 2.0, 1e-9);
 }
 
+TEST_F(Aspiration, ResetReturnsToTheRestShapeKeepingParameters) {
+  const double loaded = solve();
+  CapsuleOptions c = scene_.capsule;
+  c.thickness = 40e-6;
+  ASSERT_EQ(model_->set_capsule(c), "");
+  ASSERT_TRUE(model_->step().converged());
+  model_->reset();
+  EXPECT_EQ(model_->displacement().cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(model_->time(), 0.0);
+  EXPECT_EQ(model_->capsule().thickness, 40e-6);
+  ASSERT_TRUE(model_->step().converged());
+  EXPECT_LT(model_->probe_displacement(0).z(), loaded) << "the thicker capsule is still in force";
+}
+
 TEST_F(Aspiration, DivergingStepRollsBackToLastGoodState) {
   solve();
   const Eigen::VectorXd good = model_->positions();
