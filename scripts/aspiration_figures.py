@@ -87,28 +87,24 @@ def main():
     summary["ratio_without_over_with"] = (summary["without capsule"]["centre_displacement_mm"] /
                                           summary["with capsule"]["centre_displacement_mm"])
 
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for label, (x, uz) in profiles.items():
-        ax.plot(1e3 * x, 1e3 * uz, marker="o", label=label)
-    ax.axvspan(2.5, 12.5, color="0.9", label="tube lumen (10 mm)")
-    ax.set_xlabel("x along the mid cut y = 7.5 mm (mm)")
-    ax.set_ylabel("vertical displacement of the top face (mm)")
-    ax.set_title(f"Aspiration at -3 kPa: ratio {summary['ratio_without_over_with']:.2f}")
-    ax.legend()
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(os.path.join(args.out, "aspiration_profile.png"), dpi=100)
+    def figure(curves, xscale, style, xlabel, ylabel, title, name, decorate=None):
+        fig, ax = plt.subplots(figsize=(6, 4))
+        for label, (x, uz) in curves.items():
+            ax.plot(xscale * x, 1e3 * uz, label=label, **style)
+        if decorate:
+            decorate(ax)
+        ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
+        ax.legend()
+        ax.grid(alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(os.path.join(args.out, name), dpi=100)
 
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for label, (t, uz) in histories.items():
-        ax.plot(t, 1e3 * uz, label=label)
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("centre node displacement (mm)")
-    ax.set_title(f"Suction applied at t = 0, backward Euler, dt = {args.dt * 1e3:g} ms")
-    ax.legend()
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(os.path.join(args.out, "aspiration_time.png"), dpi=100)
+    figure(profiles, 1e3, {"marker": "o"}, "x along the mid cut y = 7.5 mm (mm)",
+           "vertical displacement of the top face (mm)",
+           f"Aspiration at -3 kPa: ratio {summary['ratio_without_over_with']:.2f}", "aspiration_profile.png",
+           lambda ax: ax.axvspan(2.5, 12.5, color="0.9", label="tube lumen (10 mm)"))
+    figure(histories, 1.0, {}, "time (s)", "centre node displacement (mm)",
+           f"Suction applied at t = 0, backward Euler, dt = {args.dt * 1e3:g} ms", "aspiration_time.png")
 
     print(json.dumps(summary, indent=2))
 

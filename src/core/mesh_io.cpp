@@ -120,34 +120,48 @@ int gmsh_nodes_per_element(long long type) {
   return (type >= 1 && type < static_cast<long long>(sizeof(n) / sizeof(n[0]))) ? n[type] : 0;
 }
 
+Eigen::Vector3d read_point(Tokens& in) {
+  Eigen::Vector3d p;
+  for (int c = 0; c < 3; ++c) p[c] = in.number("coordinate");
+  return p;
+}
+
+// Reads the k node ids of one element and keeps it when it is a tetrahedron (Gmsh type 4).
+void read_element_nodes(Tokens& in, long long type, long long k, RawMesh& raw) {
+  std::array<long long, 4> t{};
+  for (long long j = 0; j < k; ++j) {
+    const long long v = in.integer("node id");
+    if (j < 4) t[j] = v;
+  }
+  if (type != 4) return;
+  if (k != 4) in.fail("tetrahedron with " + std::to_string(k) + " nodes");
+  raw.tet.push_back(t);
+  raw.tet_line.push_back(in.line());
+}
+
+// Nodes per element of a Gmsh type, or a clear error for a type that cannot be skipped.
+int gmsh_element_size(Tokens& in, long long type) {
+  const int k = gmsh_nodes_per_element(type);
+  if (k == 0) in.fail("unknown element type " + std::to_string(type));
+  return k;
+}
+
 void read_gmsh1(Tokens& in, RawMesh& raw) {
   // "$NOD" was consumed by the format detection.
   const long long nn = in.count("node count");
   for (long long i = 0; i < nn; ++i) {
     raw.node_id.push_back(in.integer("node id"));
-    Eigen::Vector3d p;
-    for (int c = 0; c < 3; ++c) p[c] = in.number("coordinate");
-    raw.node.push_back(p);
+    raw.node.push_back(read_point(in));
   }
   in.expect("$ENDNOD");
   in.expect("$ELM");
   const long long ne = in.count("element count");
   for (long long i = 0; i < ne; ++i) {
-    const long long id = in.integer("element id");
+    in.integer("element id");
     const long long type = in.integer("element type");
     in.integer("physical region");
     in.integer("elementary region");
-    const long long k = in.count("node count of element", 64);
-    std::array<long long, 4> t{};
-    for (long long j = 0; j < k; ++j) {
-      const long long v = in.integer("node id");
-      if (type == 4 && j < 4) t[j] = v;
-    }
-    if (type == 4) {
-      if (k != 4) in.fail("tetrahedron " + std::to_string(id) + " has " + std::to_string(k) + " nodes");
-      raw.tet.push_back(t);
-      raw.tet_line.push_back(in.line());
-    }
+    read_element_nodes(in, type, in.count("node count of element", 64), raw);
   }
   in.expect("$ENDELM");
 }
@@ -159,9 +173,7 @@ void read_gmsh2(Tokens& in, RawMesh& raw) {
       const long long nn = in.count("node count");
       for (long long i = 0; i < nn; ++i) {
         raw.node_id.push_back(in.integer("node id"));
-        Eigen::Vector3d p;
-        for (int c = 0; c < 3; ++c) p[c] = in.number("coordinate");
-        raw.node.push_back(p);
+        raw.node.push_back(read_point(in));
       }
       in.expect("$EndNodes");
     } else if (section == "$Elements") {
@@ -169,19 +181,10 @@ void read_gmsh2(Tokens& in, RawMesh& raw) {
       for (long long i = 0; i < ne; ++i) {
         in.integer("element id");
         const long long type = in.integer("element type");
-        const int k = gmsh_nodes_per_element(type);
-        if (k == 0) in.fail("unknown element type " + std::to_string(type));
+        const int k = gmsh_element_size(in, type);
         const long long tags = in.count("tag count", 64);
         for (long long j = 0; j < tags; ++j) in.integer("tag");
-        std::array<long long, 4> t{};
-        for (int j = 0; j < k; ++j) {
-          const long long v = in.integer("node id");
-          if (j < 4) t[j] = v;
-        }
-        if (type == 4) {
-          raw.tet.push_back(t);
-          raw.tet_line.push_back(in.line());
-        }
+        read_element_nodes(in, type, k, raw);
       }
       in.expect("$EndElements");
     } else if (!section.empty() && section[0] == '$') {
@@ -207,10 +210,8 @@ void read_gmsh4(Tokens& in, RawMesh& raw) {
         const long long n = in.count("nodes in block");
         for (long long i = 0; i < n; ++i) raw.node_id.push_back(in.integer("node tag"));
         for (long long i = 0; i < n; ++i) {
-          Eigen::Vector3d p;
-          for (int c = 0; c < 3; ++c) p[c] = in.number("coordinate");
+          raw.node.push_back(read_point(in));
           for (long long u = 0; parametric == 1 && u < dim; ++u) in.number("parametric coordinate");
-          raw.node.push_back(p);
         }
       }
       in.expect("$EndNodes");
@@ -223,20 +224,11 @@ void read_gmsh4(Tokens& in, RawMesh& raw) {
         in.integer("entity dimension");
         in.integer("entity tag");
         const long long type = in.integer("element type");
-        const int k = gmsh_nodes_per_element(type);
-        if (k == 0) in.fail("unknown element type " + std::to_string(type));
+        const int k = gmsh_element_size(in, type);
         const long long n = in.count("elements in block");
         for (long long i = 0; i < n; ++i) {
           in.integer("element tag");
-          std::array<long long, 4> t{};
-          for (int j = 0; j < k; ++j) {
-            const long long v = in.integer("node tag");
-            if (j < 4) t[j] = v;
-          }
-          if (type == 4) {
-            raw.tet.push_back(t);
-            raw.tet_line.push_back(in.line());
-          }
+          read_element_nodes(in, type, k, raw);
         }
       }
       in.expect("$EndElements");
@@ -262,10 +254,8 @@ void read_vtk(Tokens& in, RawMesh& raw) {
       const long long n = in.count("point count");
       in.next("data type");
       for (long long i = 0; i < n; ++i) {
-        Eigen::Vector3d p;
-        for (int c = 0; c < 3; ++c) p[c] = in.number("coordinate");
         raw.node_id.push_back(i);
-        raw.node.push_back(p);
+        raw.node.push_back(read_point(in));
       }
     } else if (key == "CELLS") {
       const long long n = in.count("cell count");
