@@ -36,6 +36,7 @@ struct StepResult {
   Status status = Status::Converged;
   int iterations = 0;         // Newton iterations (factorisations) in this step
   int linear_iterations = 0;  // GMRES iterations (preconditioned solves) in this step
+  int factorizations = 0;     // numeric factorisations in this step (often 0: the factor is reused)
   double residual = 0;      // force residual relative to the load norm, at the end
   StepTiming timing;
   std::string message;      // why, when not converged
@@ -165,7 +166,8 @@ class LiverModel {
   Eigen::VectorXd node_normal_;  // work vector of update_contacts
   std::vector<char> released_;  // per node, within the current step
   ProbeReaction probe_reaction_;
-  std::vector<char> fixed_dof_;
+  std::vector<char> fixed_dof_, fixed_next_;
+  bool factor_valid_ = false;  // the factor preconditions the current constraint set and material
   CholmodSolver solver_cholmod_;
 
   Eigen::VectorXd X_, x_, v_, x_start_;

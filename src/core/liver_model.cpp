@@ -12,7 +12,8 @@ namespace liver_sim {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-constexpr int kMaxKrylov = 30;  // GMRES iterations per Newton step
+constexpr int kMaxKrylov = 30;      // GMRES iterations per Newton step
+constexpr int kRefactorAfter = 10;  // GMRES iterations beyond which the factor is refreshed
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
@@ -197,9 +198,12 @@ std::vector<int> LiverModel::select_triangles(const Region& r, const std::string
 }
 
 void LiverModel::set_fixed(const std::vector<int>& nodes) {
-  fixed_dof_.assign(3 * mesh_.V.rows(), 0);
+  fixed_next_.assign(3 * mesh_.V.rows(), 0);
   for (int node : nodes)
-    for (int c = 0; c < 3; ++c) fixed_dof_[3 * node + c] = 1;
+    for (int c = 0; c < 3; ++c) fixed_next_[3 * node + c] = 1;
+  if (fixed_next_ == fixed_dof_) return;  // same constraints: the factor stays valid
+  fixed_dof_.swap(fixed_next_);
+  factor_valid_ = false;
   fixed_entries_.clear();
   const auto& start = pattern_.column_start();
   const auto& rows = pattern_.row_index();
@@ -225,6 +229,7 @@ std::string LiverModel::set_capsule(const CapsuleOptions& capsule) {
   membrane_.set_material(capsule);
   capsule_active_ = std::move(active);
   capsule_ = capsule;
+  factor_valid_ = false;
   return "";
 }
 
@@ -233,6 +238,7 @@ int LiverModel::capsule_triangles() const {
 }
 
 void LiverModel::reset() {
+  factor_valid_ = false;
   x_ = X_;
   target_ = X_;
   contact_nodes_.clear();
@@ -408,19 +414,29 @@ void LiverModel::newton(StepResult& result) {
       break;
     }
     ++result.iterations;
-    t0 = Clock::now();
-    assemble_system();
     // Rayleigh damping uses the stiffness at the start of the step, fixed within the step, so
     // that the residual stays one function of x while Newton iterates. (v = 0 there, so the
     // residual already computed is unchanged.)
-    if (result.iterations == 1 && solver_.rayleigh_stiffness > 0) damping_stiffness_ = stiffness_;
-    result.timing.assembly_ms += ms_since(t0);
-    t0 = Clock::now();
-    const bool factored = solver_cholmod_.factorize(system_);
-    result.timing.factorization_ms += ms_since(t0);
-    if (!factored) {
-      fail("tangent matrix is not positive definite");
-      break;
+    const bool damping_snapshot = result.iterations == 1 && solver_.mode == SolverOptions::Mode::Dynamic &&
+                                  solver_.rayleigh_stiffness > 0;
+    if (!factor_valid_ || damping_snapshot) {
+      t0 = Clock::now();
+      assemble_system();
+      if (damping_snapshot) damping_stiffness_ = stiffness_;
+      result.timing.assembly_ms += ms_since(t0);
+    }
+    // The factor of an earlier tangent keeps serving as the preconditioner (GMRES works on the
+    // true Jacobian) until it no longer preconditions well or the constraints changed.
+    if (!factor_valid_) {
+      t0 = Clock::now();
+      const bool factored = solver_cholmod_.factorize(system_);
+      result.timing.factorization_ms += ms_since(t0);
+      ++result.factorizations;
+      if (!factored) {
+        fail("tangent matrix is not positive definite");
+        break;
+      }
+      factor_valid_ = true;
     }
     // Newton-Krylov: GMRES on the true Jacobian (directional differences of the residual),
     // preconditioned by the factorised corotational tangent. The tangent alone misses the
@@ -444,8 +460,10 @@ void LiverModel::newton(StepResult& result) {
     const Gmres::Operator preconditioner = [&](const Eigen::VectorXd& in, Eigen::VectorXd& out) {
       solver_cholmod_.solve(in, out);
     };
-    result.linear_iterations += gmres_.solve(jacobian, preconditioner, r_, dx_, forcing, kMaxKrylov);
+    const int krylov = gmres_.solve(jacobian, preconditioner, r_, dx_, forcing, kMaxKrylov);
+    result.linear_iterations += krylov;
     result.timing.solve_ms += ms_since(t0);
+    if (krylov > kRefactorAfter || gmres_.relative_residual() > forcing) factor_valid_ = false;
     if (!dx_.allFinite()) {
       fail("non-finite Newton update");
       break;

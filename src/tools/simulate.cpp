@@ -114,7 +114,8 @@ int run(const Options& opt) {
   std::vector<double> step_ms;
   StepResult last;
   liver_sim::StepTiming sum;
-  int iterations = 0, max_iterations = 0, linear_iterations = 0, converged_steps = 0, steps_done = 0;
+  int iterations = 0, max_iterations = 0, linear_iterations = 0, factorizations = 0, converged_steps = 0,
+      steps_done = 0;
   auto last_report = std::chrono::steady_clock::now();
   for (int k = 1; k <= steps; ++k) {
     if (!dynamic) model.set_load_scale(static_cast<double>(k) / steps);
@@ -126,6 +127,7 @@ int run(const Options& opt) {
     sum.solve_ms += last.timing.solve_ms;
     iterations += last.iterations;
     linear_iterations += last.linear_iterations;
+    factorizations += last.factorizations;
     max_iterations = std::max(max_iterations, last.iterations);
     converged_steps += last.converged();
     if (csv.is_open()) {
@@ -170,6 +172,7 @@ int run(const Options& opt) {
      << "  \"time\": " << model.time() << ",\n"
      << "  \"newton_iterations\": {\"total\": " << iterations << ", \"max_per_step\": " << max_iterations << "},\n"
      << "  \"gmres_iterations\": " << linear_iterations << ",\n"
+     << "  \"factorizations\": " << factorizations << ",\n"
      << "  \"step_time_ms\": {\"min\": " << sorted.front() << ", \"median\": " << sorted[sorted.size() / 2]
      << ", \"max\": " << sorted.back() << "},\n"
      << "  \"phase_time_ms_per_step\": {\"assembly\": " << sum.assembly_ms / steps_done
