@@ -174,7 +174,8 @@ class LiverModel {
   Eigen::VectorXd target_;  // prescribed positions of fixed DOFs (rest, or on the probe)
   Eigen::VectorXd mass_;  // lumped, per DOF (kg)
   std::vector<PressureLoad> pressures_;
-  std::vector<NodalLoad> nodal_loads_;  // gravity and spread forces
+  std::vector<NodalLoad> nodal_loads_;  // spread forces
+  Eigen::Vector3d gravity_ = Eigen::Vector3d::Zero();  // m/s^2, acting on the lumped masses
   std::vector<Probe> probes_;
   double load_scale_ = 1.0;
   double time_ = 0.0;

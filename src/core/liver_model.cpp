@@ -117,7 +117,6 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
   for (size_t i = 0; i < scene.loads.size(); ++i) {
     const LoadOptions& load = scene.loads[i];
     const std::string what = "loads." + std::to_string(i);
-    if (load.region) require_valid(validate(*load.region));
     switch (load.kind) {
       case LoadOptions::Kind::Pressure: {
         if (!std::isfinite(load.pressure)) throw std::invalid_argument(what + ".value must be finite");
@@ -133,9 +132,7 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
       }
       case LoadOptions::Kind::Gravity: {
         if (!load.vector.allFinite()) throw std::invalid_argument(what + ".acceleration must be finite");
-        // Lumped masses differ per node, so gravity is one nodal load per node.
-        for (int node = 0; node < n; ++node)
-          nodal_loads_.push_back({mass_[3 * node] * load.vector, {node}});
+        gravity_ += load.vector;
         break;
       }
       case LoadOptions::Kind::Force: {
@@ -293,6 +290,8 @@ void LiverModel::external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) c
   }
   for (const NodalLoad& l : nodal_loads_)
     for (int node : l.nodes) f.segment<3>(3 * node) += l.force;
+  if (!gravity_.isZero())
+    for (int i = 0; i < f.size(); i += 3) f.segment<3>(i) += mass_[i] * gravity_;
 }
 
 double LiverModel::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference, bool zero_fixed) {
