@@ -179,6 +179,15 @@ TEST(MeshIO, IgnoresOtherElementsAndUnusedNodes) {
   const TetMesh m = read_mesh(path);
   EXPECT_EQ(m.T.rows(), 1);
   EXPECT_EQ(m.V.rows(), 4);
+
+  const std::string vtk = write_file("mixed.vtk",
+                                     "# vtk DataFile Version 3.0\nmixed\nASCII\nDATASET UNSTRUCTURED_GRID\n"
+                                     "POINTS 5 double\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n7 7 7\n"
+                                     "CELLS 3 11\n3 0 1 2\n4 0 1 2 3\n1 4\nCELL_TYPES 3\n5\n10\n1\n"
+                                     "POINT_DATA 5\nSCALARS t double 1\nLOOKUP_TABLE default\n0\n0\n0\n0\n0\n");
+  const TetMesh v = read_mesh(vtk);
+  EXPECT_EQ(v.T.rows(), 1);
+  EXPECT_EQ(v.V.rows(), 4);
 }
 
 TEST(MeshIO, ReorientsAFileWhoseTetrahedraAreAllNegative) {
