@@ -203,6 +203,11 @@ TEST_F(Node, MalformedInputIsRefusedAndCountedWhileTheNodeRuns) {
   sensor_msgs::PointCloud2Modifier(empty).setPointCloud2FieldsByString(1, "xyz");
   cloud_pub_.publish(empty);
   ASSERT_TRUE(refused(3)) << "empty cloud: " << status_.text;
+  sensor_msgs::PointCloud2 truncated = empty;  // says 1000 points, carries none
+  sensor_msgs::PointCloud2Modifier(truncated).resize(1000);
+  truncated.data.clear();
+  cloud_pub_.publish(truncated);
+  ASSERT_TRUE(refused(4)) << "truncated cloud: " << status_.text;
   // A valid cloud is taken and not counted as refused.
   sensor_msgs::PointCloud2 cloud;
   cloud.header.frame_id = "liver";
@@ -214,7 +219,7 @@ TEST_F(Node, MalformedInputIsRefusedAndCountedWhileTheNodeRuns) {
   cloud_pub_.publish(cloud);
   const unsigned count = status_count_;
   ASSERT_TRUE(wait_for([&] { return status_count_ > count + 5; }, 10.0)) << "status stopped flowing";
-  EXPECT_EQ(status_.rejected_inputs, before.rejected_inputs + 3);
+  EXPECT_EQ(status_.rejected_inputs, before.rejected_inputs + 4);
   EXPECT_NEAR(status_.max_displacement, before.max_displacement, 1e-12) << "refused input changed the model";
 }
 

@@ -126,6 +126,7 @@ TEST(Scene, UnknownKeysAndWrongTypesNameTheKey) {
   EXPECT_ERROR(std::string(kMinimal) + "fixed: [{box: {min: [0,0,0], max: [1,1,1]}, sphere: {center: [0,0,0], radius: 1}}]\n",
                "fixed.0: expected exactly one of box, sphere, disc");
   EXPECT_ERROR("mesh: [1, 2\n", "YAML syntax");
+  EXPECT_ERROR("mesh: " + std::string(10000, '[') + "\n", "nested deeper than 32 levels");
 }
 
 TEST(Scene, InvalidValuesAreRefusedNamingTheField) {

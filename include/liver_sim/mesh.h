@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <istream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -30,6 +31,8 @@ class MeshError : public std::runtime_error {
 // with a mix of orientations, degenerate tetrahedra, or no tetrahedra throws MeshError naming
 // the offending element indices.
 TetMesh read_mesh(const std::string& path, double scale = 1.0);
+// Same, from a stream; `path` names the source in messages.
+TetMesh read_mesh(std::istream& stream, const std::string& path, double scale = 1.0);
 
 void write_gmsh22(const std::string& path, const TetMesh& mesh);
 void write_gmsh41(const std::string& path, const TetMesh& mesh);

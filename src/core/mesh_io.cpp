@@ -330,10 +330,14 @@ std::ofstream open_for_writing(const std::string& path) {
 }  // namespace
 
 TetMesh read_mesh(const std::string& path, double scale) {
-  if (!std::isfinite(scale) || scale <= 0) throw MeshError(path + ": scale must be finite and > 0");
   std::ifstream file(path);
   if (!file) throw MeshError(path + ": cannot open");
-  Tokens in(path, file);
+  return read_mesh(file, path, scale);
+}
+
+TetMesh read_mesh(std::istream& stream, const std::string& path, double scale) {
+  if (!std::isfinite(scale) || scale <= 0) throw MeshError(path + ": scale must be finite and > 0");
+  Tokens in(path, stream);
   if (in.at_end()) throw MeshError(path + ": empty file");
   RawMesh raw;
   try {

@@ -2,6 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -279,6 +280,13 @@ void apply_override(YAML::Node node, const std::vector<std::string>& path, size_
 Scene parse_scene(const std::string& yaml, const std::string& base_dir, const std::string& origin,
                   const std::vector<std::string>& overrides) {
   const Reader reader(origin);
+  // yaml-cpp recurses once per nesting level: bound what reaches it (scenes are small and flat).
+  if (yaml.size() > (1u << 20)) reader.fail("", "larger than 1 MiB");
+  int depth = 0;
+  for (char c : yaml) {
+    depth = std::max(0, depth + (c == '[' || c == '{') - (c == ']' || c == '}'));
+    if (depth > 32) reader.fail("", "nested deeper than 32 levels");
+  }
   YAML::Node root;
   try {
     root = YAML::Load(yaml);

@@ -225,7 +225,27 @@ class LiverSimNode {
     }
   }
 
+  // Why a cloud cannot be converted, or "" (PCL's conversion indexes an empty cloud and trusts
+  // the layout fields, so they are checked first).
+  static std::string cloud_layout_error(const sensor_msgs::PointCloud2& c) {
+    if (static_cast<uint64_t>(c.width) * c.height == 0) return "empty cloud";
+    if (static_cast<uint64_t>(c.point_step) * c.width > c.row_step ||
+        static_cast<uint64_t>(c.row_step) * c.height > c.data.size())
+      return "data shorter than width, height and steps say";
+    int xyz = 0;
+    for (const auto& f : c.fields)
+      if ((f.name == "x" || f.name == "y" || f.name == "z") && f.datatype == sensor_msgs::PointField::FLOAT32 &&
+          f.offset + 4 <= c.point_step)
+        ++xyz;
+    return xyz == 3 ? "" : "no float32 x, y, z fields";
+  }
+
   void on_cloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    const std::string layout = cloud_layout_error(*msg);
+    if (!layout.empty()) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      return reject("points: " + layout);
+    }
     auto cloud = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
     try {
       pcl::fromROSMsg(*msg, *cloud);
@@ -236,7 +256,7 @@ class LiverSimNode {
     size_t finite_points = 0;
     for (const auto& p : cloud->points) finite_points += std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
     std::lock_guard<std::mutex> lock(mutex_);
-    if (finite_points == 0) return reject("points: empty cloud or no finite point");
+    if (finite_points == 0) return reject("points: no finite point");
     latest_cloud_ = std::move(cloud);  // kept for registration; replaced, never queued
     ++clouds_;
   }
