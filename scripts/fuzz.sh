@@ -3,7 +3,7 @@
 # sanitizer report or exception other than MeshError/SceneError fails the run.
 #   scripts/fuzz.sh [SECONDS_PER_TARGET]   (default 300) the corpus grows in build/fuzz/corpus_*
 #   scripts/fuzz.sh smoke                  20,000 inputs per target from the seeds, fixed random
-#                                          seed: repeatable, run by the test command
+#                                          seed: a bounded run for the test command
 source "$(dirname "$0")/common.sh"
 if [ "${1:-}" = smoke ]; then
   LIMIT=(-runs=20000 -seed=1)
