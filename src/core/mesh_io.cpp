@@ -166,26 +166,16 @@ void read_gmsh1(Tokens& in, RawMesh& raw) {
   in.expect("$ENDELM");
 }
 
-void read_gmsh2(Tokens& in, RawMesh& raw) {
+// Gmsh 2.2 and 4.1 share their section structure; only the $Nodes and $Elements bodies differ.
+template <typename Nodes, typename Elements>
+void read_gmsh_sections(Tokens& in, Nodes read_nodes, Elements read_elements) {
   while (!in.at_end()) {
     const std::string section = in.next("a section");
     if (section == "$Nodes") {
-      const long long nn = in.count("node count");
-      for (long long i = 0; i < nn; ++i) {
-        raw.node_id.push_back(in.integer("node id"));
-        raw.node.push_back(read_point(in));
-      }
+      read_nodes();
       in.expect("$EndNodes");
     } else if (section == "$Elements") {
-      const long long ne = in.count("element count");
-      for (long long i = 0; i < ne; ++i) {
-        in.integer("element id");
-        const long long type = in.integer("element type");
-        const int k = gmsh_element_size(in, type);
-        const long long tags = in.count("tag count", 64);
-        for (long long j = 0; j < tags; ++j) in.integer("tag");
-        read_element_nodes(in, type, k, raw);
-      }
+      read_elements();
       in.expect("$EndElements");
     } else if (!section.empty() && section[0] == '$') {
       in.skip_section(section);
@@ -195,49 +185,66 @@ void read_gmsh2(Tokens& in, RawMesh& raw) {
   }
 }
 
-void read_gmsh4(Tokens& in, RawMesh& raw) {
-  while (!in.at_end()) {
-    const std::string section = in.next("a section");
-    if (section == "$Nodes") {
-      const long long blocks = in.count("entity block count");
-      in.count("node count");
-      in.integer("min node tag");
-      in.integer("max node tag");
-      for (long long b = 0; b < blocks; ++b) {
-        const long long dim = in.integer("entity dimension");
-        in.integer("entity tag");
-        const long long parametric = in.integer("parametric flag");
-        const long long n = in.count("nodes in block");
-        for (long long i = 0; i < n; ++i) raw.node_id.push_back(in.integer("node tag"));
-        for (long long i = 0; i < n; ++i) {
+void read_gmsh2(Tokens& in, RawMesh& raw) {
+  read_gmsh_sections(
+      in,
+      [&] {
+        const long long nn = in.count("node count");
+        for (long long i = 0; i < nn; ++i) {
+          raw.node_id.push_back(in.integer("node id"));
           raw.node.push_back(read_point(in));
-          for (long long u = 0; parametric == 1 && u < dim; ++u) in.number("parametric coordinate");
         }
-      }
-      in.expect("$EndNodes");
-    } else if (section == "$Elements") {
-      const long long blocks = in.count("entity block count");
-      in.count("element count");
-      in.integer("min element tag");
-      in.integer("max element tag");
-      for (long long b = 0; b < blocks; ++b) {
-        in.integer("entity dimension");
-        in.integer("entity tag");
-        const long long type = in.integer("element type");
-        const int k = gmsh_element_size(in, type);
-        const long long n = in.count("elements in block");
-        for (long long i = 0; i < n; ++i) {
-          in.integer("element tag");
+      },
+      [&] {
+        const long long ne = in.count("element count");
+        for (long long i = 0; i < ne; ++i) {
+          in.integer("element id");
+          const long long type = in.integer("element type");
+          const int k = gmsh_element_size(in, type);
+          const long long tags = in.count("tag count", 64);
+          for (long long j = 0; j < tags; ++j) in.integer("tag");
           read_element_nodes(in, type, k, raw);
         }
-      }
-      in.expect("$EndElements");
-    } else if (!section.empty() && section[0] == '$') {
-      in.skip_section(section);
-    } else {
-      in.fail("expected a section, got '" + section + "'");
-    }
-  }
+      });
+}
+
+void read_gmsh4(Tokens& in, RawMesh& raw) {
+  read_gmsh_sections(
+      in,
+      [&] {
+        const long long blocks = in.count("entity block count");
+        in.count("node count");
+        in.integer("min node tag");
+        in.integer("max node tag");
+        for (long long b = 0; b < blocks; ++b) {
+          const long long dim = in.integer("entity dimension");
+          in.integer("entity tag");
+          const long long parametric = in.integer("parametric flag");
+          const long long n = in.count("nodes in block");
+          for (long long i = 0; i < n; ++i) raw.node_id.push_back(in.integer("node tag"));
+          for (long long i = 0; i < n; ++i) {
+            raw.node.push_back(read_point(in));
+            for (long long u = 0; parametric == 1 && u < dim; ++u) in.number("parametric coordinate");
+          }
+        }
+      },
+      [&] {
+        const long long blocks = in.count("entity block count");
+        in.count("element count");
+        in.integer("min element tag");
+        in.integer("max element tag");
+        for (long long b = 0; b < blocks; ++b) {
+          in.integer("entity dimension");
+          in.integer("entity tag");
+          const long long type = in.integer("element type");
+          const int k = gmsh_element_size(in, type);
+          const long long n = in.count("elements in block");
+          for (long long i = 0; i < n; ++i) {
+            in.integer("element tag");
+            read_element_nodes(in, type, k, raw);
+          }
+        }
+      });
 }
 
 void read_vtk(Tokens& in, RawMesh& raw) {
