@@ -27,26 +27,25 @@ Eigen::VectorXd transform(const Eigen::VectorXd& x, const Eigen::Matrix3d& Q, co
   return y;
 }
 
-Eigen::VectorXd tet_forces(CorotationalTetra& tets, const Eigen::VectorXd& x) {
+// Global internal forces of a set of elements (tetrahedra or membranes) at positions x.
+template <typename Elements, typename Nodes>
+Eigen::VectorXd assembled_forces(Elements& elements, const Nodes& nodes, const Eigen::VectorXd& x) {
   Eigen::VectorXd f = Eigen::VectorXd::Zero(x.size());
-  tets.update_rotations(x);
-  Vector12d fe;
-  for (int e = 0; e < tets.size(); ++e) {
-    tets.element_force(e, x, fe);
-    for (int k = 0; k < 4; ++k) f.segment<3>(3 * tets.elements()(e, k)) += fe.segment<3>(3 * k);
+  elements.update_rotations(x);
+  Eigen::Matrix<double, 3 * Nodes::ColsAtCompileTime, 1> fe;
+  for (int e = 0; e < elements.size(); ++e) {
+    elements.element_force(e, x, fe);
+    for (int k = 0; k < Nodes::ColsAtCompileTime; ++k) f.template segment<3>(3 * nodes(e, k)) += fe.template segment<3>(3 * k);
   }
   return f;
 }
 
+Eigen::VectorXd tet_forces(CorotationalTetra& tets, const Eigen::VectorXd& x) {
+  return assembled_forces(tets, tets.elements(), x);
+}
+
 Eigen::VectorXd membrane_forces(MembraneCST& m, const Eigen::VectorXd& x) {
-  Eigen::VectorXd f = Eigen::VectorXd::Zero(x.size());
-  m.update_rotations(x);
-  Vector9d fe;
-  for (int e = 0; e < m.size(); ++e) {
-    m.element_force(e, x, fe);
-    for (int k = 0; k < 3; ++k) f.segment<3>(3 * m.triangles()(e, k)) += fe.segment<3>(3 * k);
-  }
-  return f;
+  return assembled_forces(m, m.triangles(), x);
 }
 
 Eigen::VectorXd random_field(int n, double amplitude, unsigned seed) {

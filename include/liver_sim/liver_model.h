@@ -88,6 +88,7 @@ class LiverModel {
   const Eigen::MatrixX3i& boundary() const { return boundary_; }
   const Eigen::VectorXd& positions() const { return x_; }  // 3 #V, node-major (m)
   Eigen::VectorXd displacement() const { return x_ - X_; }
+  double max_displacement() const;  // largest node displacement from the rest shape (m)
   double time() const { return time_; }
   int capsule_triangles() const;  // membrane triangles in use (0 when disabled)
   const SolverOptions& solver_options() const { return solver_; }
@@ -163,6 +164,7 @@ class LiverModel {
   };
   std::optional<SphereProbe> probe_;
   std::vector<int> contact_nodes_;
+  std::vector<int> constrained_nodes_;  // work vector of update_contacts: scene-fixed + contacts
   Eigen::VectorXd node_normal_;  // work vector of update_contacts
   std::vector<char> released_;  // per node, within the current step
   ProbeReaction probe_reaction_;

@@ -247,6 +247,12 @@ void LiverModel::reset() {
   time_ = 0;
 }
 
+double LiverModel::max_displacement() const {
+  double max_u = 0;
+  for (int i = 0; i < x_.size(); i += 3) max_u = std::max(max_u, (x_.segment<3>(i) - X_.segment<3>(i)).norm());
+  return max_u;
+}
+
 Eigen::Vector3d LiverModel::probe_displacement(int i) const {
   const Probe& p = probes_[i];
   Eigen::Vector3d u = Eigen::Vector3d::Zero();
@@ -544,9 +550,9 @@ void LiverModel::update_contacts() {
     }
     contact_nodes_.push_back(i);
   }
-  std::vector<int> fixed = scene_fixed_nodes_;
-  fixed.insert(fixed.end(), contact_nodes_.begin(), contact_nodes_.end());
-  set_fixed(fixed);
+  constrained_nodes_.assign(scene_fixed_nodes_.begin(), scene_fixed_nodes_.end());
+  constrained_nodes_.insert(constrained_nodes_.end(), contact_nodes_.begin(), contact_nodes_.end());
+  set_fixed(constrained_nodes_);
 }
 
 bool LiverModel::release_tensile_contacts() {

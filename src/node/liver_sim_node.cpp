@@ -296,10 +296,7 @@ class LiverSimNode {
     s.step_time = r.timing.total_ms / 1000.0;
     s.iterations = r.iterations;
     s.residual = r.residual;
-    const Eigen::VectorXd u = model_->displacement();
-    double max_u = 0;
-    for (int i = 0; i < u.size(); i += 3) max_u = std::max(max_u, u.segment<3>(i).norm());
-    s.max_displacement = max_u;
+    s.max_displacement = model_->max_displacement();
     s.active_contacts = model_->probe_reaction().contacts;
     s.state = state_;
     {
