@@ -13,6 +13,13 @@ namespace liver_sim {
 using Matrix12d = Eigen::Matrix<double, 12, 12>;
 using Vector12d = Eigen::Matrix<double, 12, 1>;
 
+// Rotation of the polar decomposition F = R S (a proper rotation also for inverted F).
+Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F);
+// d theta / d x (3 x 12): the spatial rotation increment of R = polar_rotation(F) per change of
+// the tetrahedron's 4 node positions, for F = [x1-x0, x2-x0, x3-x0] Dm_inv.
+Eigen::Matrix<double, 3, 12> polar_rotation_derivative(const Eigen::Matrix3d& R, const Eigen::Matrix3d& F,
+                                                      const Eigen::Matrix3d& Dm_inv);
+
 class CorotationalTetra {
  public:
   // X: rest positions (#V x 3, m); T: positively oriented tetrahedra.

@@ -1,6 +1,13 @@
 // The composite liver model: corotational tetrahedra (parenchyma) + corotational CST membranes
-// on the boundary (Glisson's capsule) in one stiffness matrix, fixed nodes, loads, and a
-// Newton / backward-Euler solver on CHOLMOD. ROS-free.
+// on the boundary (Glisson's capsule) + corotational beams (vessels) embedded in the tetrahedra,
+// in one stiffness matrix; fixed nodes, loads, and a Newton / backward-Euler solver on CHOLMOD.
+// ROS-free.
+//
+// Vessels add no unknowns: a vessel node sits in a tetrahedron, its position is the barycentric
+// interpolation of that tetrahedron's nodes and its rotation is the tetrahedron's rotation (polar
+// decomposition of F), so the vessel is bonded to the tissue around it. Beam forces reach the
+// tissue through J^T (J: the derivative of the beam-node positions and rotations with respect to
+// the tetrahedron's nodes) and the beam stiffness as J^T K J.
 #pragma once
 
 #include <Eigen/Core>
@@ -10,12 +17,14 @@
 #include <vector>
 
 #include "liver_sim/cholmod_solver.h"
+#include "liver_sim/corotational_beam.h"
 #include "liver_sim/corotational_tetra.h"
 #include "liver_sim/gmres.h"
 #include "liver_sim/membrane_cst.h"
 #include "liver_sim/mesh.h"
 #include "liver_sim/scene.h"
 #include "liver_sim/sparse_pattern.h"
+#include "liver_sim/vessel_tree.h"
 
 namespace liver_sim {
 
@@ -50,7 +59,8 @@ class LiverModel {
  public:
   // Precomputes element matrices, the matrix pattern, scatter maps and the CHOLMOD analysis.
   // Throws std::invalid_argument naming the problem (invalid option, region selecting nothing,
-  // probe outside the mesh, a static scene with nothing fixed).
+  // probe outside the mesh, a static scene with nothing fixed, a vessel file that does not load,
+  // a vessel node farther outside the mesh than its snap tolerance).
   LiverModel(TetMesh mesh, const Scene& scene);
 
   // Static mode: Newton to equilibrium under the loads times load_scale(). Dynamic mode: one
@@ -93,11 +103,19 @@ class LiverModel {
   int capsule_triangles() const;  // membrane triangles in use (0 when disabled)
   const SolverOptions& solver_options() const { return solver_; }
 
+  // Vessels: beam nodes, beams (node pairs), the vessel each beam belongs to, current positions.
+  int num_vessel_nodes() const { return static_cast<int>(vessel_nodes_.size()); }
+  int num_beams() const { return beams_ ? beams_->size() : 0; }
+  const Eigen::MatrixX2i& beam_segments() const { return beams_->segments(); }
+  int beam_vessel(int e) const { return beam_vessel_[e]; }
+  const std::string& vessel_name(int v) const { return vessel_names_[v]; }
+  Eigen::Vector3d vessel_node_position(int k) const { return interpolate(x_, vessel_nodes_[k]); }
+
   int num_probes() const { return static_cast<int>(probes_.size()); }
   const std::string& probe_name(int i) const { return probes_[i].name; }
   Eigen::Vector3d probe_displacement(int i) const;
 
-  // Internal elastic forces (tetrahedra + active membranes) at positions x; updates rotations.
+  // Internal elastic forces (tetrahedra + active membranes + beams) at state x; updates rotations.
   void internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f);
   // External forces at positions x (follower pressure on the current triangles), unscaled.
   void external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
@@ -109,10 +127,14 @@ class LiverModel {
   CholmodSolver& linear_solver() { return solver_cholmod_; }
 
  private:
+  // A point that follows the tetrahedron containing it.
+  struct EmbeddedPoint {
+    int tet = -1;
+    Eigen::Vector4d barycentric = Eigen::Vector4d::Zero();
+  };
   struct Probe {
     std::string name;
-    int tet;
-    Eigen::Vector4d barycentric;
+    EmbeddedPoint at;
   };
   struct PressureLoad {
     double pressure;
@@ -123,6 +145,18 @@ class LiverModel {
     std::vector<int> nodes;
   };
 
+  // The tetrahedron that contains p best (largest smallest barycentric weight); `inverse_edges`
+  // are the inverse rest edge matrices of all tetrahedra.
+  EmbeddedPoint locate(const Eigen::Vector3d& p, const std::vector<Eigen::Matrix3d>& inverse_edges) const;
+  Eigen::Vector3d interpolate(const Eigen::VectorXd& x, const EmbeddedPoint& q) const;
+  // Loads and embeds the enabled vessel trees; returns the 8 tissue nodes each beam couples
+  // (the 4 of each end's tetrahedron).
+  std::vector<std::vector<int>> embed_vessels(const std::vector<VesselOptions>& vessels,
+                                              const std::vector<Eigen::Matrix3d>& inverse_edges);
+  // Host rotations and their derivatives, beam-node positions, then the beam forces.
+  void add_beam_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f);
+  // J of beam e: its [p_a theta_a p_b theta_b] with respect to its 8 tissue nodes.
+  Eigen::Matrix<double, 12, 24> beam_mapping(int e) const;
   std::vector<int> select_nodes(const Region& r, const std::string& what) const;
   std::vector<int> select_triangles(const Region& r, const std::string& what) const;
   void set_fixed(const std::vector<int>& nodes);
@@ -151,7 +185,7 @@ class LiverModel {
   MembraneCST membrane_;               // all boundary triangles; capsule_active_ selects
   std::vector<int> capsule_active_;
   SparsePattern pattern_;
-  std::vector<int> tet_map_, tri_map_;  // scatter maps, 144 per tetrahedron, 81 per triangle
+  std::vector<int> tet_map_, tri_map_, beam_map_;  // scatter maps: 144 per tetrahedron, 81 per triangle, 576 per beam
   std::vector<double> stiffness_, system_;
   std::vector<double> damping_stiffness_;  // K at the start of a dynamic step (Rayleigh b K)
   std::vector<int> fixed_entries_;      // off-diagonal values in fixed rows/columns
@@ -179,6 +213,19 @@ class LiverModel {
   std::vector<NodalLoad> nodal_loads_;  // spread forces
   Eigen::Vector3d gravity_ = Eigen::Vector3d::Zero();  // m/s^2, acting on the lumped masses
   std::vector<Probe> probes_;
+  std::vector<EmbeddedPoint> vessel_nodes_;
+  std::optional<CorotationalBeams> beams_;
+  std::vector<int> beam_vessel_;
+  std::vector<std::string> vessel_names_;
+  // Tetrahedra that host vessel nodes: index per tetrahedron (-1: none), and per host its inverse
+  // rest edge matrix, current rotation and rotation derivative (3 x 12: d theta / d x) from the
+  // last force call.
+  std::vector<int> host_index_;
+  std::vector<int> hosts_;
+  std::vector<Eigen::Matrix3d> host_inverse_edges_, host_rotation_;
+  std::vector<Eigen::Matrix<double, 3, 12>> host_rotation_derivative_;
+  std::vector<Eigen::Matrix3d> vessel_rotation_;  // per vessel node: its host's rotation
+  Eigen::VectorXd vessel_positions_;
   double load_scale_ = 1.0;
   double time_ = 0.0;
   double force_floor_;   // residual (N) below which a state counts as converged: round-off, 1e-12 E L^2

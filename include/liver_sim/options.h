@@ -31,6 +31,17 @@ struct CapsuleOptions {
   std::optional<Region> region;   // boundary triangles whose centroid lies inside; all if unset
 };
 
+// One vascular tree embedded in the parenchyma (beam elements; see corotational_beam.h).
+struct VesselOptions {
+  std::string name;                // for messages and output
+  std::string file;                // .vtk or .yaml centre-line graph (vessel_tree.h)
+  double scale = 1.0;              // file units -> m
+  bool enabled = true;
+  double young_modulus = 0.62e6;   // Pa, vessel wall (porcine hepatic vein at small strain)
+  double poisson_ratio = 0.45;     // -, in (-1, 0.5)
+  double snap_tolerance = 1e-3;    // m: nodes at most this far outside the mesh are moved onto it
+};
+
 struct LoadOptions {
   enum class Kind {
     Pressure,  // follower pressure on boundary triangles of `region` (Pa, >0 pushes inward)
@@ -65,5 +76,6 @@ std::string validate(const ParenchymaOptions& o);
 std::string validate(const CapsuleOptions& o);
 std::string validate(const SolverOptions& o);
 std::string validate(const Region& r);
+std::string validate(const VesselOptions& o);  // field names prefixed with "vessels.<name>."
 
 }  // namespace liver_sim

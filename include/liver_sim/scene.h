@@ -31,6 +31,7 @@ struct Scene {
   std::vector<LoadOptions> loads;
   SolverOptions solver;
   std::vector<ProbeOptions> probes;
+  std::vector<VesselOptions> vessels;  // files resolved like the mesh file
 };
 
 // Parses a scene file. `overrides` are "dotted.key=value" strings applied to the YAML tree

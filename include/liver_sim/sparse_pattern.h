@@ -1,5 +1,5 @@
 // Fixed sparsity pattern of the global stiffness matrix (3 DOFs per node, coupled through
-// tetrahedra), stored as the upper triangle in compressed columns, the layout CHOLMOD reads.
+// tetrahedra and through any further groups of nodes, such as the nodes a beam couples), stored as the upper triangle in compressed columns, the layout CHOLMOD reads.
 // Built once per topology; element matrices are added through precomputed scatter maps so that
 // assembly writes values in place with no search and no allocation.
 #pragma once
@@ -11,7 +11,8 @@ namespace liver_sim {
 
 class SparsePattern {
  public:
-  SparsePattern(int num_nodes, const Eigen::MatrixX4i& T);
+  SparsePattern() = default;
+  SparsePattern(int num_nodes, const Eigen::MatrixX4i& T, const std::vector<std::vector<int>>& groups = {});
 
   int rows() const { return 3 * num_nodes_; }
   int nonzeros() const { return static_cast<int>(row_index_.size()); }
@@ -32,7 +33,7 @@ class SparsePattern {
                 Eigen::VectorXd& y) const;
 
  private:
-  int num_nodes_;
+  int num_nodes_ = 0;
   std::vector<int> column_start_;
   std::vector<int> row_index_;
   std::vector<int> diagonal_;

@@ -76,8 +76,7 @@ Eigen::Matrix3d CorotationalTetra::rotation_geometric(int e, const Eigen::Vector
   return edge_frame(node(x, T_(e, 1)) - x0, node(x, T_(e, 2)) - x0) * rest_frame_T_[e];
 }
 
-Eigen::Matrix3d CorotationalTetra::rotation_polar(int e, const Eigen::VectorXd& x) const {
-  const Eigen::Matrix3d F = deformation_gradient(e, x);
+Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F) {
   // Fast path (elements not inverted or flattened): scaled Newton iteration for the polar
   // factor, X <- (g X + X^-T / g) / 2 (Higham 1986), quadratic convergence.
   if (F.determinant() > 1e-3 * F.squaredNorm() * F.norm()) {
@@ -99,6 +98,32 @@ Eigen::Matrix3d CorotationalTetra::rotation_polar(int e, const Eigen::VectorXd& 
   // R stays a proper rotation and the element is pushed back through (Irving et al. 2004).
   if ((U * V.transpose()).determinant() < 0) U.col(2) = -U.col(2);
   return U * V.transpose();
+}
+
+Eigen::Matrix<double, 3, 12> polar_rotation_derivative(const Eigen::Matrix3d& R, const Eigen::Matrix3d& F,
+                                                      const Eigen::Matrix3d& Dm_inv) {
+  // F = R S: the skew part of R^T dF is (tr(S) I - S) w for the material rotation increment w
+  // (dR = R [w]x), and dF = sum_k dx_k b_k^T, so w = (tr(S) I - S)^-1 sum_k b_k x (R^T dx_k).
+  const Eigen::Matrix3d RtF = R.transpose() * F;
+  const Eigen::Matrix3d S = 0.5 * (RtF + RtF.transpose());
+  const Eigen::Matrix3d A = (S.trace() * Eigen::Matrix3d::Identity() - S).inverse();
+  Eigen::Matrix<double, 3, 12> G;
+  Eigen::Vector3d b0 = Eigen::Vector3d::Zero();
+  for (int k = 1; k < 4; ++k) {
+    const Eigen::Vector3d b = Dm_inv.row(k - 1).transpose();
+    b0 -= b;
+    Eigen::Matrix3d B;
+    B << 0, -b.z(), b.y(), b.z(), 0, -b.x(), -b.y(), b.x(), 0;
+    G.block<3, 3>(0, 3 * k) = R * A * B * R.transpose();
+  }
+  Eigen::Matrix3d B0;
+  B0 << 0, -b0.z(), b0.y(), b0.z(), 0, -b0.x(), -b0.y(), b0.x(), 0;
+  G.block<3, 3>(0, 0) = R * A * B0 * R.transpose();
+  return G;
+}
+
+Eigen::Matrix3d CorotationalTetra::rotation_polar(int e, const Eigen::VectorXd& x) const {
+  return polar_rotation(deformation_gradient(e, x));
 }
 
 void CorotationalTetra::update_rotations(const Eigen::VectorXd& x) {

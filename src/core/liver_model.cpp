@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <sstream>
 #include <stdexcept>
 
 namespace liver_sim {
@@ -61,9 +62,17 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
       parenchyma_(scene.parenchyma),
       capsule_(scene.capsule),
       tetra_(mesh_.V, mesh_.T, parenchyma_),
-      membrane_(mesh_.V, boundary_, capsule_),
-      pattern_(static_cast<int>(mesh_.V.rows()), mesh_.T) {
+      membrane_(mesh_.V, boundary_, capsule_) {
   const int n = static_cast<int>(mesh_.V.rows());
+  std::vector<Eigen::Matrix3d> inverse_edges(mesh_.T.rows());
+  for (int e = 0; e < mesh_.T.rows(); ++e) {
+    Eigen::Matrix3d Dm;
+    for (int k = 0; k < 3; ++k) Dm.col(k) = (mesh_.V.row(mesh_.T(e, k + 1)) - mesh_.V.row(mesh_.T(e, 0))).transpose();
+    inverse_edges[e] = Dm.inverse();
+  }
+  const std::vector<std::vector<int>> beam_groups = embed_vessels(scene.vessels, inverse_edges);
+  const int dofs = 3 * n;
+  pattern_ = SparsePattern(n, mesh_.T, beam_groups);
   on_boundary_.assign(n, 0);
   for (int f = 0; f < boundary_.rows(); ++f)
     for (int k = 0; k < 3; ++k) on_boundary_[boundary_(f, k)] = 1;
@@ -78,6 +87,8 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
     const int nodes[3] = {boundary_(f, 0), boundary_(f, 1), boundary_(f, 2)};
     pattern_.append_scatter_map(nodes, 3, tri_map_);
   }
+  beam_map_.reserve(576 * beam_groups.size());
+  for (const std::vector<int>& g : beam_groups) pattern_.append_scatter_map(g.data(), 8, beam_map_);
   stiffness_.assign(pattern_.nonzeros(), 0.0);
   damping_stiffness_.assign(pattern_.nonzeros(), 0.0);
   system_.assign(pattern_.nonzeros(), 0.0);
@@ -86,9 +97,9 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
   X_ = flatten(mesh_.V);
   x_ = X_;
   target_ = X_;
-  v_ = Eigen::VectorXd::Zero(3 * n);
+  v_ = Eigen::VectorXd::Zero(dofs);
   x_start_ = X_;
-  mass_ = Eigen::VectorXd::Zero(3 * n);
+  mass_ = Eigen::VectorXd::Zero(dofs);
   for (int e = 0; e < mesh_.T.rows(); ++e)
     for (int k = 0; k < 4; ++k)
       mass_.segment<3>(3 * mesh_.T(e, k)).array() += parenchyma_.density * tetra_.volume(e) / 4;
@@ -145,31 +156,113 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
     }
   }
 
-  // Probes: the tetrahedron that contains the point best (largest smallest barycentric weight).
   for (const ProbeOptions& p : scene.probes) {
     if (!p.point.allFinite()) throw std::invalid_argument("probe '" + p.name + "': point must be finite");
-    Probe best{p.name, -1, Eigen::Vector4d::Zero()};
-    double best_min = -std::numeric_limits<double>::infinity();
-    for (int e = 0; e < mesh_.T.rows(); ++e) {
-      Eigen::Matrix3d Dm;
-      const Eigen::Vector3d X0 = mesh_.V.row(mesh_.T(e, 0)).transpose();
-      for (int k = 0; k < 3; ++k) Dm.col(k) = mesh_.V.row(mesh_.T(e, k + 1)).transpose() - X0;
-      const Eigen::Vector3d w = Dm.inverse() * (p.point - X0);
-      const Eigen::Vector4d b(1 - w.sum(), w[0], w[1], w[2]);
-      if (b.minCoeff() > best_min) {
-        best_min = b.minCoeff();
-        best.tet = e;
-        best.barycentric = b;
-      }
-    }
+    const EmbeddedPoint at = locate(p.point, inverse_edges);
     // Points on a curved surface may sit a little outside the faceted mesh.
-    if (best_min < -0.05)
-      throw std::invalid_argument("probe '" + p.name + "' lies outside the mesh");
-    probes_.push_back(best);
+    if (at.barycentric.minCoeff() < -0.05) throw std::invalid_argument("probe '" + p.name + "' lies outside the mesh");
+    probes_.push_back({p.name, at});
   }
 
-  const int dofs = 3 * n;
   for (Eigen::VectorXd* v : {&r_, &r_try_, &dx_, &x_try_, &f_tmp_, &v_tmp_}) v->setZero(dofs);
+}
+
+LiverModel::EmbeddedPoint LiverModel::locate(const Eigen::Vector3d& p,
+                                             const std::vector<Eigen::Matrix3d>& inverse_edges) const {
+  EmbeddedPoint best;
+  double best_min = -std::numeric_limits<double>::infinity();
+  for (int e = 0; e < mesh_.T.rows(); ++e) {
+    const Eigen::Vector3d w = inverse_edges[e] * (p - mesh_.V.row(mesh_.T(e, 0)).transpose());
+    const Eigen::Vector4d b(1 - w.sum(), w[0], w[1], w[2]);
+    if (b.minCoeff() > best_min) {
+      best_min = b.minCoeff();
+      best = {e, b};
+    }
+  }
+  return best;
+}
+
+Eigen::Vector3d LiverModel::interpolate(const Eigen::VectorXd& x, const EmbeddedPoint& q) const {
+  Eigen::Vector3d p = Eigen::Vector3d::Zero();
+  for (int k = 0; k < 4; ++k) p += q.barycentric[k] * x.segment<3>(3 * mesh_.T(q.tet, k));
+  return p;
+}
+
+std::vector<std::vector<int>> LiverModel::embed_vessels(const std::vector<VesselOptions>& vessels,
+                                                        const std::vector<Eigen::Matrix3d>& inverse_edges) {
+  const Eigen::VectorXd rest_x = flatten(mesh_.V);
+  std::vector<Eigen::Vector3d> rest;
+  std::vector<Eigen::Vector2i> segments;
+  std::vector<BeamSection> sections;
+  for (const VesselOptions& v : vessels) {
+    require_valid(validate(v));
+    if (!v.enabled) continue;
+    const std::string what = "vessels." + v.name;
+    VesselTree tree;
+    try {
+      tree = read_vessel_tree(v.file, v.scale);
+    } catch (const VesselError& e) {
+      throw std::invalid_argument(what + ": " + e.what());
+    }
+    const int base = num_vessel_nodes();
+    for (int i = 0; i < tree.points.rows(); ++i) {
+      const Eigen::Vector3d p = tree.points.row(i).transpose();
+      EmbeddedPoint at = locate(p, inverse_edges);
+      if (at.barycentric.minCoeff() < 0) {
+        // Outside the faceted surface: onto the nearest point of the best tetrahedron's span
+        // (clamped weights), if that is within the tolerance.
+        at.barycentric = at.barycentric.cwiseMax(0.0);
+        at.barycentric /= at.barycentric.sum();
+        const double gap = (interpolate(rest_x, at) - p).norm();
+        if (gap > v.snap_tolerance) {
+          std::ostringstream m;
+          m << what << ": node " << i << " at (" << p.transpose() << ") m lies " << gap * 1e3
+            << " mm outside the mesh (snap_tolerance " << v.snap_tolerance * 1e3 << " mm)";
+          throw std::invalid_argument(m.str());
+        }
+      }
+      vessel_nodes_.push_back(at);
+      rest.push_back(interpolate(rest_x, at));
+    }
+    for (int s = 0; s < tree.segments.rows(); ++s) {
+      const int a = tree.segments(s, 0), b = tree.segments(s, 1);
+      segments.emplace_back(base + a, base + b);
+      BeamSection section;
+      section.outer_radius = 0.5 * (tree.radius[a] + tree.radius[b]);
+      section.wall_thickness = 0.5 * (tree.wall_thickness[a] + tree.wall_thickness[b]);
+      section.young_modulus = v.young_modulus;
+      section.poisson_ratio = v.poisson_ratio;
+      sections.push_back(section);
+      beam_vessel_.push_back(static_cast<int>(vessel_names_.size()));
+    }
+    vessel_names_.push_back(v.name);
+  }
+  std::vector<std::vector<int>> groups;  // per beam, the 4 nodes of each end's tetrahedron
+  if (segments.empty()) return groups;
+  const int m = num_vessel_nodes();
+  Eigen::MatrixX3d X(m, 3);
+  for (int k = 0; k < m; ++k) X.row(k) = rest[k].transpose();
+  Eigen::MatrixX2i S(static_cast<int>(segments.size()), 2);
+  for (size_t s = 0; s < segments.size(); ++s) S.row(s) = segments[s].transpose();
+  beams_.emplace(X, S, sections);
+  host_index_.assign(mesh_.T.rows(), -1);
+  for (const EmbeddedPoint& p : vessel_nodes_) {
+    if (host_index_[p.tet] >= 0) continue;
+    host_index_[p.tet] = static_cast<int>(hosts_.size());
+    hosts_.push_back(p.tet);
+    host_inverse_edges_.push_back(inverse_edges[p.tet]);
+  }
+  host_rotation_.assign(hosts_.size(), Eigen::Matrix3d::Identity());
+  host_rotation_derivative_.assign(hosts_.size(), Eigen::Matrix<double, 3, 12>::Zero());
+  vessel_rotation_.assign(m, Eigen::Matrix3d::Identity());
+  vessel_positions_.setZero(3 * m);
+  for (int e = 0; e < beams_->size(); ++e) {
+    std::vector<int> g;
+    for (int end = 0; end < 2; ++end)
+      for (int k = 0; k < 4; ++k) g.push_back(mesh_.T(vessel_nodes_[S(e, end)].tet, k));
+    groups.push_back(std::move(g));
+  }
+  return groups;
 }
 
 std::vector<int> LiverModel::select_nodes(const Region& r, const std::string& what) const {
@@ -195,7 +288,7 @@ std::vector<int> LiverModel::select_triangles(const Region& r, const std::string
 }
 
 void LiverModel::set_fixed(const std::vector<int>& nodes) {
-  fixed_next_.assign(3 * mesh_.V.rows(), 0);
+  fixed_next_.assign(X_.size(), 0);
   for (int node : nodes)
     for (int c = 0; c < 3; ++c) fixed_next_[3 * node + c] = 1;
   if (fixed_next_ == fixed_dof_) return;  // same constraints: the factor stays valid
@@ -254,13 +347,7 @@ double LiverModel::max_displacement() const {
 }
 
 Eigen::Vector3d LiverModel::probe_displacement(int i) const {
-  const Probe& p = probes_[i];
-  Eigen::Vector3d u = Eigen::Vector3d::Zero();
-  for (int k = 0; k < 4; ++k) {
-    const int node = mesh_.T(p.tet, k);
-    u += p.barycentric[k] * (x_.segment<3>(3 * node) - X_.segment<3>(3 * node));
-  }
-  return u;
+  return interpolate(x_, probes_[i].at) - interpolate(X_, probes_[i].at);
 }
 
 void LiverModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
@@ -271,13 +358,53 @@ void LiverModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
     tetra_.element_force(e, x, fe);
     for (int k = 0; k < 4; ++k) f.segment<3>(3 * mesh_.T(e, k)) += fe.segment<3>(3 * k);
   }
-  if (!capsule_.enabled) return;
-  membrane_.update_rotations(x);
-  Vector9d fm;
-  for (int t : capsule_active_) {
-    membrane_.element_force(t, x, fm);
-    for (int k = 0; k < 3; ++k) f.segment<3>(3 * boundary_(t, k)) += fm.segment<3>(3 * k);
+  if (capsule_.enabled) {
+    membrane_.update_rotations(x);
+    Vector9d fm;
+    for (int t : capsule_active_) {
+      membrane_.element_force(t, x, fm);
+      for (int k = 0; k < 3; ++k) f.segment<3>(3 * boundary_(t, k)) += fm.segment<3>(3 * k);
+    }
   }
+  if (beams_) add_beam_forces(x, f);
+}
+
+void LiverModel::add_beam_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
+  for (size_t h = 0; h < hosts_.size(); ++h) {
+    const int e = hosts_[h];
+    Eigen::Matrix3d Ds;
+    for (int k = 0; k < 3; ++k) Ds.col(k) = x.segment<3>(3 * mesh_.T(e, k + 1)) - x.segment<3>(3 * mesh_.T(e, 0));
+    const Eigen::Matrix3d F = Ds * host_inverse_edges_[h];
+    host_rotation_[h] = polar_rotation(F);
+    host_rotation_derivative_[h] = polar_rotation_derivative(host_rotation_[h], F, host_inverse_edges_[h]);
+  }
+  for (int k = 0; k < num_vessel_nodes(); ++k) {
+    vessel_positions_.segment<3>(3 * k) = interpolate(x, vessel_nodes_[k]);
+    vessel_rotation_[k] = host_rotation_[host_index_[vessel_nodes_[k].tet]];
+  }
+  beams_->update_frames(vessel_positions_, vessel_rotation_);
+  Vector12d fe;
+  for (int e = 0; e < beams_->size(); ++e) {
+    beams_->element_force(e, fe);
+    for (int end = 0; end < 2; ++end) {
+      const EmbeddedPoint& at = vessel_nodes_[beams_->segments()(e, end)];
+      // Force through the barycentric weights, moment through d theta / d x of the host.
+      const Eigen::Matrix<double, 3, 12>& G = host_rotation_derivative_[host_index_[at.tet]];
+      const Eigen::Matrix<double, 12, 1> fm = G.transpose() * fe.segment<3>(6 * end + 3);
+      for (int k = 0; k < 4; ++k)
+        f.segment<3>(3 * mesh_.T(at.tet, k)) += at.barycentric[k] * fe.segment<3>(6 * end) + fm.segment<3>(3 * k);
+    }
+  }
+}
+
+Eigen::Matrix<double, 12, 24> LiverModel::beam_mapping(int e) const {
+  Eigen::Matrix<double, 12, 24> J = Eigen::Matrix<double, 12, 24>::Zero();
+  for (int end = 0; end < 2; ++end) {
+    const EmbeddedPoint& at = vessel_nodes_[beams_->segments()(e, end)];
+    for (int k = 0; k < 4; ++k) J.block<3, 3>(6 * end, 3 * (4 * end + k)).diagonal().setConstant(at.barycentric[k]);
+    J.block<3, 12>(6 * end + 3, 12 * end) = host_rotation_derivative_[host_index_[at.tet]];
+  }
+  return J;
 }
 
 void LiverModel::external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
@@ -337,6 +464,12 @@ void LiverModel::assemble_system() {
       membrane_.element_tangent(t, Km);
       scatter_add(Km, &tri_map_[81 * t], stiffness_);
     }
+  }
+  for (int e = 0; e < num_beams(); ++e) {
+    beams_->element_tangent(e, Ke);
+    const Eigen::Matrix<double, 12, 24> J = beam_mapping(e);
+    const Eigen::Matrix<double, 24, 24> Kb = J.transpose() * Ke * J;
+    scatter_add(Kb, &beam_map_[576 * e], stiffness_);
   }
   // Static: A = K. Dynamic: A = (1 + b/dt) K + (1/dt^2 + a/dt) M.
   double k_scale = 1.0, m_scale = 0.0;
@@ -474,8 +607,15 @@ void LiverModel::newton(StepResult& result) {
       break;
     }
 
-    // Backtracking on the merit (free residual and constraint gap) guards far from the solution.
+    // Backtracking guards far from the solution. A step is accepted when the merit (free
+    // residual and constraint gap) falls enough, or when the potential falls along it: the slope
+    // r . dx at the trial point, against the slope at the start, says so (trapezoid rule). The
+    // second test keeps full steps that raise the residual only because the linear step
+    // over-stretches rotating elements, as in the first step of a bending problem.
     t0 = Clock::now();
+    double slope0 = 0;
+    for (int i = 0; i < r_.size(); ++i)
+      if (!fixed_dof_[i]) slope0 += r_[i] * dx_[i];
     double alpha = 1.0, best_alpha = 1.0, best_norm = 0, best_merit = std::numeric_limits<double>::infinity();
     double ref_try = reference;
     const int max_halvings = solver_.line_search ? 6 : 0;
@@ -483,12 +623,14 @@ void LiverModel::newton(StepResult& result) {
       x_try_ = x_ + alpha * dx_;
       const double n_try = residual(x_try_, r_try_, &ref_try);
       const double m_try = merit(n_try, x_try_);
-      if (m_try < best_merit) {
+      const bool merit_falls = m_try <= (1.0 - 1e-4 * alpha) * merit0;
+      const bool potential_falls = std::isfinite(m_try) && slope0 > 0 && r_try_.dot(dx_) >= -0.5 * slope0;
+      if (merit_falls || potential_falls || m_try < best_merit) {
         best_merit = m_try;
         best_norm = n_try;
         best_alpha = alpha;
       }
-      if (m_try <= (1.0 - 1e-4 * alpha) * merit0 || h == max_halvings) break;
+      if (merit_falls || potential_falls || h == max_halvings) break;
       alpha *= 0.5;
     }
     // None was good enough: take the best one tried.

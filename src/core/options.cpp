@@ -58,6 +58,13 @@ std::string validate(const SolverOptions& o) {
                       non_negative("solver.rayleigh_stiffness", o.rayleigh_stiffness)});
 }
 
+std::string validate(const VesselOptions& o) {
+  const std::string k = "vessels." + o.name + ".";
+  return first_error({o.file.empty() ? k + "file is required" : "", positive(k + "scale", o.scale),
+                      positive(k + "young_modulus", o.young_modulus), poisson(k + "poisson_ratio", o.poisson_ratio),
+                      non_negative(k + "snap_tolerance", o.snap_tolerance)});
+}
+
 std::string validate(const Region& r) {
   if (!r.min.allFinite() || !r.max.allFinite() || !r.center.allFinite() || !r.normal.allFinite())
     return "region coordinates must be finite";

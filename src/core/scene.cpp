@@ -124,7 +124,7 @@ class Reader {
 
   Scene scene(const YAML::Node& root, const std::string& base_dir) const {
     if (!root.IsMap()) fail("", "expected a map of sections");
-    check_keys(root, "", {"mesh", "parenchyma", "capsule", "fixed", "loads", "solver", "probes"});
+    check_keys(root, "", {"mesh", "parenchyma", "capsule", "fixed", "loads", "solver", "probes", "vessels"});
     Scene s;
     read_mesh_source(required(root, "", "mesh"), base_dir, s.mesh);
     if (const YAML::Node p = root["parenchyma"]) {
@@ -168,6 +168,11 @@ class Reader {
         s.probes.push_back(probe);
       }
     }
+    if (const YAML::Node v = root["vessels"]) {
+      if (!v.IsSequence()) fail("vessels", "expected a list of vessel trees");
+      std::set<std::string> names;
+      for (size_t i = 0; i < v.size(); ++i) s.vessels.push_back(vessel(v[i], "vessels." + std::to_string(i), base_dir, names));
+    }
     require_valid(validate(s.parenchyma));
     require_valid(validate(s.capsule));
     require_valid(validate(s.solver));
@@ -181,8 +186,7 @@ class Reader {
       fail("mesh", "expected exactly one of file, box");
     if (const YAML::Node f = m["file"]) {
       if (!f.IsScalar() || f.Scalar().empty()) fail("mesh.file", "expected a path");
-      const std::filesystem::path p(f.Scalar());
-      out.file = p.is_absolute() ? p.string() : (std::filesystem::path(base_dir) / p).string();
+      out.file = resolve(base_dir, f.Scalar());
       if (m["scale"]) {
         out.scale = number(m["scale"], "mesh.scale");
         if (out.scale <= 0) fail("mesh.scale", "must be > 0");
@@ -200,6 +204,32 @@ class Reader {
       out.box_divisions[i] = integer(d[i], "mesh.box.divisions." + std::to_string(i));
       if (out.box_divisions[i] < 1) fail("mesh.box.divisions", "must be >= 1");
     }
+  }
+
+  static std::string resolve(const std::string& base_dir, const std::string& file) {
+    const std::filesystem::path p(file);
+    return p.is_absolute() ? p.string() : (std::filesystem::path(base_dir) / p).string();
+  }
+
+  VesselOptions vessel(const YAML::Node& node, const std::string& key, const std::string& base_dir,
+                       std::set<std::string>& names) const {
+    check_keys(node, key, {"name", "file", "scale", "enabled", "young_modulus", "poisson_ratio", "snap_tolerance"});
+    VesselOptions o;
+    const YAML::Node name = required(node, key, "name");
+    if (!name.IsScalar() || name.Scalar().empty() || !names.insert(name.Scalar()).second)
+      fail(key + ".name", "vessel names must be non-empty and unique");
+    o.name = name.Scalar();
+    const YAML::Node file = required(node, key, "file");
+    if (!file.IsScalar() || file.Scalar().empty()) fail(key + ".file", "expected a path");
+    o.file = resolve(base_dir, file.Scalar());
+    if (node["scale"]) o.scale = number(node["scale"], key + ".scale");
+    if (node["enabled"]) o.enabled = boolean(node["enabled"], key + ".enabled");
+    if (node["young_modulus"]) o.young_modulus = number(node["young_modulus"], key + ".young_modulus");
+    if (node["poisson_ratio"]) o.poisson_ratio = number(node["poisson_ratio"], key + ".poisson_ratio");
+    if (node["snap_tolerance"]) o.snap_tolerance = number(node["snap_tolerance"], key + ".snap_tolerance");
+    const std::string error = validate(o);
+    if (!error.empty()) fail(key, error);
+    return o;
   }
 
   LoadOptions load(const YAML::Node& node, const std::string& key) const {

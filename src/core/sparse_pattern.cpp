@@ -4,13 +4,16 @@
 
 namespace liver_sim {
 
-SparsePattern::SparsePattern(int num_nodes, const Eigen::MatrixX4i& T) : num_nodes_(num_nodes) {
+SparsePattern::SparsePattern(int num_nodes, const Eigen::MatrixX4i& T, const std::vector<std::vector<int>>& groups)
+    : num_nodes_(num_nodes) {
   // Node adjacency (each node is its own neighbour), sorted and unique.
   std::vector<std::vector<int>> neighbours(num_nodes);
   for (int i = 0; i < num_nodes; ++i) neighbours[i].push_back(i);
   for (int e = 0; e < T.rows(); ++e)
     for (int a = 0; a < 4; ++a)
       for (int b = 0; b < 4; ++b) neighbours[T(e, a)].push_back(T(e, b));
+  for (const std::vector<int>& g : groups)
+    for (int a : g) neighbours[a].insert(neighbours[a].end(), g.begin(), g.end());
   for (auto& nb : neighbours) {
     std::sort(nb.begin(), nb.end());
     nb.erase(std::unique(nb.begin(), nb.end()), nb.end());
