@@ -1,5 +1,5 @@
 // Integration test of liver_sim_node on a real ROS master (rostest test/liver_sim_node.test),
-// on the default OR scene (the aspiration cube). The tests run in order and share the node.
+// on the aspiration cube (known equilibrium and geometry). The tests run in order and share the node.
 #include <geometry_msgs/PoseStamped.h>
 #include <geometry_msgs/WrenchStamped.h>
 #include <gtest/gtest.h>

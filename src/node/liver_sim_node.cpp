@@ -62,9 +62,11 @@ class LiverSimNode {
     pnh.param("publish_rate", publish_rate_, 15.0);
     pnh.param("instrument_radius", probe_radius_, 0.003);
     pnh.param("color_scale_max", color_scale_max_, 0.005);
+    pnh.param("surface_alpha", surface_alpha_, 1.0);
     pnh.param("instrument_frames", instrument_frames_, std::vector<std::string>{});
     if (!(rate_ > 0) || !(publish_rate_ > 0) || !(probe_radius_ > 0) || !(color_scale_max_ > 0))
       throw std::invalid_argument("~rate, ~publish_rate, ~instrument_radius and ~color_scale_max must be > 0");
+    if (!(surface_alpha_ >= 0 && surface_alpha_ <= 1)) throw std::invalid_argument("~surface_alpha must be in [0, 1]");
     // ~parenchyma/*, ~capsule/*, ~solver/* override the scalars of the scene file.
     std::vector<std::string> overrides;
     for (const char* section : {"parenchyma", "capsule", "solver"}) {
@@ -81,12 +83,14 @@ class LiverSimNode {
       throw std::invalid_argument(scene_path + ": " + e.what());
     }
     capsule_ = scene.capsule;
-    ROS_INFO("liver_sim: %s: %ld nodes, %ld tetrahedra, %d capsule triangles, %s mode", scene_path.c_str(),
-             static_cast<long>(model_->mesh().V.rows()), static_cast<long>(model_->mesh().T.rows()),
-             model_->capsule_triangles(), scene.solver.mode == SolverOptions::Mode::Static ? "static" : "dynamic");
+    ROS_INFO("liver_sim: %s: %ld nodes, %ld tetrahedra, %d capsule triangles, %d vessel beams, %s mode",
+             scene_path.c_str(), static_cast<long>(model_->mesh().V.rows()), static_cast<long>(model_->mesh().T.rows()),
+             model_->capsule_triangles(), model_->num_beams(),
+             scene.solver.mode == SolverOptions::Mode::Static ? "static" : "dynamic");
 
     mesh_pub_ = pnh.advertise<visualization_msgs::Marker>("mesh", 1, true);
     instrument_pub_ = pnh.advertise<visualization_msgs::Marker>("instruments", 1, true);
+    vessel_pub_ = pnh.advertise<visualization_msgs::Marker>("vessels", 1, true);
     status_pub_ = pnh.advertise<SimulationStatus>("status", 10);
     wrench_pub_ = pnh.advertise<geometry_msgs::WrenchStamped>("wrench", 10);
     pose_sub_ = nh.subscribe("instrument_pose", 1, &LiverSimNode::on_pose, this);
@@ -324,8 +328,14 @@ class LiverSimNode {
     marker_.header.stamp = reflected_stamp_.isZero() ? ros::Time::now() : reflected_stamp_;
     marker_.ns = "liver";
     marker_.id = 0;
-    fill_mesh_marker(*model_, color_scale_max_, marker_);
+    fill_mesh_marker(*model_, color_scale_max_, surface_alpha_, marker_);
     mesh_pub_.publish(marker_);
+    if (model_->num_beams() > 0) {
+      vessel_marker_.header = marker_.header;
+      vessel_marker_.ns = "vessels";
+      fill_vessel_marker(*model_, vessel_marker_);
+      vessel_pub_.publish(vessel_marker_);
+    }
 
     // The probe tip as a translucent sphere (deleted when there is no probe).
     visualization_msgs::Marker tip;
@@ -367,12 +377,12 @@ class LiverSimNode {
   diagnostic_updater::Updater updater_;
   std::unique_ptr<LiverModel> model_;
   std::string frame_id_;
-  double rate_, publish_rate_, probe_radius_, color_scale_max_;
+  double rate_, publish_rate_, probe_radius_, color_scale_max_, surface_alpha_;
   std::vector<std::string> instrument_frames_;
-  ros::Publisher mesh_pub_, instrument_pub_, status_pub_, wrench_pub_;
+  ros::Publisher mesh_pub_, instrument_pub_, vessel_pub_, status_pub_, wrench_pub_;
   ros::Subscriber pose_sub_, command_sub_, cloud_sub_;
   ros::ServiceServer reset_srv_, capsule_srv_;
-  visualization_msgs::Marker marker_;
+  visualization_msgs::Marker marker_, vessel_marker_;
 
   // Simulation thread only.
   StepResult last_;

@@ -18,7 +18,7 @@ std_msgs::ColorRGBA displacement_colour(double u, double scale_max) {
   return c;
 }
 
-void fill_mesh_marker(const LiverModel& model, double scale_max, visualization_msgs::Marker& marker) {
+void fill_mesh_marker(const LiverModel& model, double scale_max, double alpha, visualization_msgs::Marker& marker) {
   marker.type = visualization_msgs::Marker::TRIANGLE_LIST;
   marker.action = visualization_msgs::Marker::ADD;
   marker.pose.orientation.w = 1.0;
@@ -38,7 +38,36 @@ void fill_mesh_marker(const LiverModel& model, double scale_max, visualization_m
       p.z = x[3 * node + 2];
       const double u = (x.segment<3>(3 * node) - X.row(node).transpose()).norm();
       marker.colors[3 * f + k] = displacement_colour(u, scale_max);
+      marker.colors[3 * f + k].a = static_cast<float>(alpha);
     }
+}
+
+void fill_vessel_marker(const LiverModel& model, visualization_msgs::Marker& marker) {
+  // Portal (violet), hepatic (blue), then repeating.
+  static const float palette[3][3] = {{0.6f, 0.2f, 0.8f}, {0.2f, 0.4f, 1.0f}, {0.9f, 0.3f, 0.3f}};
+  marker.type = visualization_msgs::Marker::LINE_LIST;
+  marker.action = visualization_msgs::Marker::ADD;
+  marker.pose.orientation.w = 1.0;
+  marker.scale.x = 0.002;  // m, line width
+  marker.color.a = 1.0f;
+  const int beams = model.num_beams();
+  marker.points.resize(2 * beams);
+  marker.colors.resize(2 * beams);
+  for (int e = 0; e < beams; ++e) {
+    const float* rgb = palette[model.beam_vessel(e) % 3];
+    for (int end = 0; end < 2; ++end) {
+      const Eigen::Vector3d p = model.vessel_node_position(model.beam_segments()(e, end));
+      geometry_msgs::Point& q = marker.points[2 * e + end];
+      q.x = p.x();
+      q.y = p.y();
+      q.z = p.z();
+      std_msgs::ColorRGBA& c = marker.colors[2 * e + end];
+      c.r = rgb[0];
+      c.g = rgb[1];
+      c.b = rgb[2];
+      c.a = 1.0f;
+    }
+  }
 }
 
 }  // namespace liver_sim

@@ -1,0 +1,162 @@
+#!/usr/bin/python3
+"""Generates the vascularised liver phantom (SI units, metres) reproducibly:
+
+  config/phantom/liver_phantom.msh  tetrahedral mesh (Gmsh 2.2 ASCII), two fused ellipsoidal
+                                    lobes with a flattened inferior face
+  config/phantom/portal.vtk         portal vein tree (legacy VTK polydata: radius, wall_thickness)
+  config/phantom/hepatic.vtk        hepatic vein tree
+
+Run: scripts/make_phantom.sh (installs python3-gmsh if missing). The scene that uses these
+files, with the tumour targets and the ligament attachments, is config/scenes/liver_phantom.yaml.
+"""
+import math
+import os
+import sys
+
+import gmsh
+import numpy as np
+
+OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "config", "phantom")
+MESH_SIZE = 0.009  # m, target tetrahedron edge: about 11,000 tetrahedra
+
+# Lobes: centre (m), semi-axes (m). Inferior face cut at z = Z_CUT.
+LOBES = [((0.030, 0.000, 0.000), (0.085, 0.075, 0.060)),   # right lobe
+         ((-0.060, 0.010, 0.015), (0.060, 0.045, 0.030))]  # left lobe
+Z_CUT = -0.035
+MARGIN = 0.006    # m, vessel centre lines stay this far inside the analytic surface
+SPACING = 0.006   # m, beam length along a branch
+
+
+def inside(p, margin=MARGIN):
+    if p[2] < Z_CUT + margin:
+        return False
+    for c, a in LOBES:
+        if sum(((p[i] - c[i]) / (a[i] - margin)) ** 2 for i in range(3)) <= 1.0:
+            return True
+    return False
+
+
+def make_mesh(path):
+    gmsh.initialize()
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.option.setNumber("General.NumThreads", 1)
+    gmsh.model.add("liver_phantom")
+    occ = gmsh.model.occ
+    vols = []
+    for c, a in LOBES:
+        s = occ.addSphere(c[0], c[1], c[2], 1.0)
+        occ.dilate([(3, s)], c[0], c[1], c[2], a[0], a[1], a[2])
+        vols.append((3, s))
+    fused, _ = occ.fuse([vols[0]], vols[1:])
+    cut_box = occ.addBox(-0.3, -0.3, -0.3, 0.6, 0.6, 0.3 + Z_CUT)
+    occ.cut(fused, [(3, cut_box)])
+    occ.synchronize()
+    gmsh.option.setNumber("Mesh.MeshSizeMax", MESH_SIZE)
+    gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * MESH_SIZE)
+    gmsh.option.setNumber("Mesh.Algorithm3D", 1)
+    gmsh.option.setNumber("Mesh.Optimize", 1)
+    gmsh.option.setNumber("Mesh.RandomSeed", 1)
+    gmsh.option.setNumber("Mesh.MshFileVersion", 2.2)
+    gmsh.option.setNumber("Mesh.SaveAll", 0)
+    gmsh.model.addPhysicalGroup(3, [t for _, t in gmsh.model.getEntities(3)], 1)
+    gmsh.model.mesh.generate(3)
+    gmsh.write(path)
+    _, elem_tags, _ = gmsh.model.mesh.getElements(3)
+    count = sum(len(t) for t in elem_tags)
+    gmsh.finalize()
+    return count
+
+
+def unit(v):
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
+
+
+def rotate(v, axis, angle):
+    """Rodrigues rotation of v about a unit axis."""
+    axis = unit(axis)
+    return (v * math.cos(angle) + np.cross(axis, v) * math.sin(angle)
+            + axis * np.dot(axis, v) * (1 - math.cos(angle)))
+
+
+class Tree:
+    def __init__(self):
+        self.points, self.radius, self.wall, self.segments = [], [], [], []
+
+    def node(self, p, r):
+        self.points.append(np.asarray(p, float))
+        self.radius.append(r)
+        self.wall.append(0.1 * r)  # vein walls: about a tenth of the radius
+        return len(self.points) - 1
+
+    def branch(self, parent, direction, length, radius, depth, spin):
+        """A straight branch from node `parent`, then two children (bifurcation) while inside."""
+        start = self.points[parent]
+        d = unit(direction)
+        steps = max(1, int(round(length / SPACING)))
+        last = parent
+        for k in range(1, steps + 1):
+            p = start + d * length * k / steps
+            if not inside(p):
+                return
+            n = self.node(p, radius)
+            self.segments.append((last, n))
+            last = n
+        if depth == 0:
+            return
+        # Children split +-32 degrees about an axis normal to the branch, turning 90 degrees at
+        # each generation so that the tree fills the volume.
+        axis = rotate(unit(np.cross(d, [0.0, 0.0, 1.0]) if abs(d[2]) < 0.95 else [1.0, 0.0, 0.0]), d, spin)
+        for sign in (1, -1):
+            self.branch(last, rotate(d, axis, sign * math.radians(32)), 0.72 * length, 0.75 * radius,
+                        depth - 1, spin + math.pi / 2)
+
+    def write_vtk(self, path, title):
+        n = len(self.points)
+        with open(path, "w") as f:
+            f.write("# vtk DataFile Version 3.0\n%s (m)\nASCII\nDATASET POLYDATA\n" % title)
+            f.write("POINTS %d double\n" % n)
+            for p in self.points:
+                f.write("%.6f %.6f %.6f\n" % tuple(p))
+            f.write("LINES %d %d\n" % (len(self.segments), 3 * len(self.segments)))
+            for a, b in self.segments:
+                f.write("2 %d %d\n" % (a, b))
+            f.write("POINT_DATA %d\n" % n)
+            for name, values in (("radius", self.radius), ("wall_thickness", self.wall)):
+                f.write("SCALARS %s double 1\nLOOKUP_TABLE default\n" % name)
+                f.write("\n".join("%.6g" % v for v in values) + "\n")
+
+
+def portal_tree():
+    """Enters at the hilum on the inferior face, splits into a right and a left branch."""
+    t = Tree()
+    hilum = t.node((0.000, -0.005, Z_CUT + MARGIN + 0.001), 0.0060)
+    t.branch(hilum, (0.0, 0.1, 1.0), 0.018, 0.0060, 0, 0.0)
+    trunk_end = len(t.points) - 1
+    t.branch(trunk_end, (1.0, 0.0, 0.35), 0.045, 0.0045, 3, 0.0)    # right portal vein
+    t.branch(trunk_end, (-1.0, 0.15, 0.3), 0.040, 0.0040, 3, 0.0)   # left portal vein
+    return t
+
+
+def hepatic_tree():
+    """Right, middle and left hepatic veins draining to the vena cava, posterior-superior."""
+    t = Tree()
+    cava = t.node((0.000, 0.040, 0.030), 0.0070)
+    t.branch(cava, (1.0, -0.5, -0.2), 0.045, 0.0050, 2, 0.0)    # right
+    t.branch(cava, (0.15, -1.0, -0.3), 0.040, 0.0045, 2, 0.7)   # middle
+    t.branch(cava, (-1.0, -0.3, -0.15), 0.040, 0.0045, 2, 0.0)  # left
+    return t
+
+
+def main():
+    os.makedirs(OUT, exist_ok=True)
+    tets = make_mesh(os.path.join(OUT, "liver_phantom.msh"))
+    for name, tree in (("portal", portal_tree()), ("hepatic", hepatic_tree())):
+        tree.write_vtk(os.path.join(OUT, name + ".vtk"), name + " vein tree of the liver phantom")
+        print("%s: %d nodes, %d segments" % (name, len(tree.points), len(tree.segments)))
+    print("liver_phantom.msh: %d tetrahedra" % tets)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
