@@ -5,10 +5,16 @@
                                     lobes with a flattened inferior face
   config/phantom/portal.vtk         portal vein tree (legacy VTK polydata: radius, wall_thickness)
   config/phantom/hepatic.vtk        hepatic vein tree
+  config/phantom/sofa_liver2_portal.vtk  a portal-like tree inside the external SOFA liver2 mesh
+                                    (../shared/data/sofa-liver, scale 0.1), when that is present
 
 Run: scripts/make_phantom.sh (installs python3-gmsh if missing). The scene that uses these
 files, with the tumour targets and the ligament attachments, is config/scenes/liver_phantom.yaml.
+With --check, writes into --out and compares byte for byte with the committed files (exit 1 on
+a difference): the test suite runs this so that the phantom stays reproducible.
 """
+import argparse
+import filecmp
 import math
 import os
 import sys
@@ -16,7 +22,7 @@ import sys
 import gmsh
 import numpy as np
 
-OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "config", "phantom")
+COMMITTED = os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", "config", "phantom")
 MESH_SIZE = 0.009  # m, target tetrahedron edge: about 11,000 tetrahedra
 
 # Lobes: centre (m), semi-axes (m). Inferior face cut at z = Z_CUT.
@@ -27,7 +33,7 @@ MARGIN = 0.006    # m, vessel centre lines stay this far inside the analytic sur
 SPACING = 0.006   # m, beam length along a branch
 
 
-def inside(p, margin=MARGIN):
+def inside_phantom(p, margin=MARGIN):
     if p[2] < Z_CUT + margin:
         return False
     for c, a in LOBES:
@@ -80,7 +86,8 @@ def rotate(v, axis, angle):
 
 
 class Tree:
-    def __init__(self):
+    def __init__(self, inside=inside_phantom):
+        self.inside = inside
         self.points, self.radius, self.wall, self.segments = [], [], [], []
 
     def node(self, p, r):
@@ -97,7 +104,7 @@ class Tree:
         last = parent
         for k in range(1, steps + 1):
             p = start + d * length * k / steps
-            if not inside(p):
+            if not self.inside(p):
                 return
             n = self.node(p, radius)
             self.segments.append((last, n))
@@ -148,13 +155,68 @@ def hepatic_tree():
     return t
 
 
+class MeshInside:
+    """Point-in-mesh test for a tetrahedral mesh file, with a clearance from its surface."""
+
+    def __init__(self, path, scale):
+        gmsh.initialize()
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.open(path)
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        index = {t: i for i, t in enumerate(tags)}
+        xyz = coords.reshape(-1, 3) * scale
+        _, _, nodes = gmsh.model.mesh.getElements(3, -1)
+        tets = np.array([index[t] for t in nodes[0]]).reshape(-1, 4)
+        gmsh.finalize()
+        self.x0 = xyz[tets[:, 0]]
+        edges = np.stack([xyz[tets[:, k]] - self.x0 for k in (1, 2, 3)], axis=2)
+        self.inv = np.linalg.inv(edges)
+        self.centroid = xyz.mean(axis=0)
+
+    def contains(self, p):
+        w = np.einsum("tij,tj->ti", self.inv, p - self.x0)
+        b = np.column_stack([1 - w.sum(axis=1), w])
+        return bool((b.min(axis=1) >= -1e-9).any())
+
+    def __call__(self, p, margin=0.005):
+        offsets = np.vstack([np.zeros(3), margin * np.eye(3), -margin * np.eye(3)])
+        return all(self.contains(p + o) for o in offsets)
+
+
+def sofa_portal_tree(path):
+    """A tree from the middle of the SOFA liver2 mesh toward both ends of the organ."""
+    inside = MeshInside(path, 0.1)
+    t = Tree(inside)
+    root = t.node(inside.centroid, 0.005)
+    t.branch(root, (1.0, 0.2, 0.1), 0.035, 0.0045, 3, 0.0)
+    t.branch(root, (-1.0, 0.1, 0.1), 0.035, 0.0045, 3, 0.0)
+    return t
+
+
 def main():
-    os.makedirs(OUT, exist_ok=True)
-    tets = make_mesh(os.path.join(OUT, "liver_phantom.msh"))
-    for name, tree in (("portal", portal_tree()), ("hepatic", hepatic_tree())):
-        tree.write_vtk(os.path.join(OUT, name + ".vtk"), name + " vein tree of the liver phantom")
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", default=COMMITTED, help="output folder (default: config/phantom)")
+    ap.add_argument("--check", action="store_true", help="compare the output with config/phantom")
+    args = ap.parse_args()
+    os.makedirs(args.out, exist_ok=True)
+    tets = make_mesh(os.path.join(args.out, "liver_phantom.msh"))
+    trees = [("portal", portal_tree()), ("hepatic", hepatic_tree())]
+    sofa = os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", "..", "shared", "data", "sofa-liver", "liver2.msh")
+    if os.path.exists(sofa):
+        trees.append(("sofa_liver2_portal", sofa_portal_tree(sofa)))
+    else:
+        print("skipped the SOFA liver2 tree: %s not found" % sofa)
+    for name, tree in trees:
+        tree.write_vtk(os.path.join(args.out, name + ".vtk"), name + " vein tree of the liver phantom")
         print("%s: %d nodes, %d segments" % (name, len(tree.points), len(tree.segments)))
     print("liver_phantom.msh: %d tetrahedra" % tets)
+    if args.check:
+        files = ["liver_phantom.msh"] + [name + ".vtk" for name, _ in trees]
+        _, differ, missing = filecmp.cmpfiles(args.out, COMMITTED, files, shallow=False)
+        if differ or missing:
+            print("differs from config/phantom: %s" % ", ".join(differ + missing))
+            return 1
+        print("identical to config/phantom: %s" % ", ".join(files))
     return 0
 
 

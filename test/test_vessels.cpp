@@ -389,5 +389,56 @@ TEST(EmbeddedVessel, PolarRotationDerivativeMatchesDifferences) {
   EXPECT_LE((dtheta - G * v).norm(), 1e-6 * dtheta.norm());
 }
 
+// The scenes with vessel trees: the phantom (the node's default) and the external SOFA liver.
+// Each converges under gravity with and without its vessels, and the vessels stiffen the organ.
+struct VesselScene {
+  const char* file;
+  const char* probe;  // the displacement compared; empty: the largest node displacement
+};
+class VascularisedLiver : public ::testing::TestWithParam<VesselScene> {};
+
+TEST_P(VascularisedLiver, VesselsStiffenTheOrgan) {
+  Scene s = load_scene(std::string(LIVER_SIM_SOURCE_DIR) + "/config/scenes/" + GetParam().file);
+  if (!std::ifstream(s.mesh.file)) GTEST_SKIP() << s.mesh.file << " not found (shared data folder absent)";
+  auto sag = [&](const Scene& scene) {
+    LiverModel m(load_scene_mesh(scene), scene);
+    const StepResult r = m.step();
+    EXPECT_TRUE(r.converged()) << r.message;
+    EXPECT_TRUE(m.positions().allFinite());
+    if (std::string(GetParam().probe).empty()) return m.max_displacement();
+    for (int p = 0; p < m.num_probes(); ++p)
+      if (m.probe_name(p) == GetParam().probe) return m.probe_displacement(p).norm();
+    ADD_FAILURE() << "no probe " << GetParam().probe;
+    return 0.0;
+  };
+  ASSERT_FALSE(s.vessels.empty());
+  const double with = sag(s);
+  s.vessels.clear();
+  const double without = sag(s);
+  EXPECT_GT(with, 0);
+  EXPECT_LT(with, 0.99 * without) << "with " << with << " m, without " << without << " m";
+}
+
+INSTANTIATE_TEST_SUITE_P(Scenes, VascularisedLiver,
+                         ::testing::Values(VesselScene{"liver_phantom.yaml", "tumour_centre"},
+                                           VesselScene{"sofa_liver.yaml", ""}),
+                         [](const auto& info) {
+                           const std::string f = info.param.file;
+                           return f.substr(0, f.find('.'));
+                         });
+
+TEST(LiverPhantom, HasTheStatedSizeVesselsAndTargets) {
+  const Scene s = load_scene(std::string(LIVER_SIM_SOURCE_DIR) + "/config/scenes/liver_phantom.yaml");
+  const LiverModel m(load_scene_mesh(s), s);
+  EXPECT_GE(m.mesh().T.rows(), 10000);
+  EXPECT_EQ(m.num_beams(), 68 + 84);
+  EXPECT_EQ(m.vessel_name(m.beam_vessel(0)), "portal");
+  EXPECT_EQ(m.vessel_name(m.beam_vessel(m.num_beams() - 1)), "hepatic");
+  EXPECT_EQ(m.num_probes(), 7);
+  const Eigen::Vector3d extent = m.mesh().V.colwise().maxCoeff() - m.mesh().V.colwise().minCoeff();
+  EXPECT_NEAR(extent.x(), 0.235, 0.005);  // metres: an adult liver's size
+  EXPECT_NEAR(extent.z(), 0.095, 0.005);
+}
+
 }  // namespace
 }  // namespace liver_sim
