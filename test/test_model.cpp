@@ -2,6 +2,8 @@
 // run-time capsule changes, rollback, validation, and the two external liver meshes.
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+
 #include <cmath>
 #include <fstream>
 
@@ -250,6 +252,45 @@ TEST_F(Aspiration, DivergingStepRollsBackToLastGoodState) {
   EXPECT_EQ(r.status, StepResult::Status::Diverged);
   EXPECT_FALSE(r.message.empty());
   EXPECT_EQ((model_->positions() - good).norm(), 0.0);
+}
+
+// A load the model cannot carry in one static step (100 kPa of suction on 3.5 kPa tissue):
+// after the iteration cap it is no closer to equilibrium, so the step is reported as stalled
+// and the state before it is kept exactly.
+TEST_F(Aspiration, StalledStepRollsBackToLastGoodState) {
+  solve();
+  const Eigen::VectorXd good = model_->positions();
+  model_->set_load_scale(1e5 / 3000.0);
+  const StepResult r = model_->step();
+  ASSERT_EQ(r.status, StepResult::Status::Diverged) << r.message;
+  EXPECT_NE(r.message.find("stalled"), std::string::npos) << r.message;
+  EXPECT_EQ((model_->positions() - good).norm(), 0.0);
+}
+
+// The strain energy used by the energy-growth check: zero for a rigid motion, unchanged by a
+// rigid rotation of a deformed state, and its derivative is the internal force (to second order
+// in the strain: corotational forces drop the derivative of R).
+TEST_F(Aspiration, ElasticEnergyIsRotationInvariantAndItsGradientIsTheForce) {
+  solve();  // a deformed state (1.4 mm on 15 mm), with capsule
+  const Eigen::VectorXd x = model_->positions();
+  const Eigen::Matrix3d Q = Eigen::AngleAxisd(1.1, Eigen::Vector3d(1, -2, 0.5).normalized()).toRotationMatrix();
+  auto rotated = [&](const Eigen::VectorXd& y) {
+    Eigen::VectorXd z = y;
+    for (int i = 0; i < z.size(); i += 3) z.segment<3>(i) = Q * y.segment<3>(i) + Eigen::Vector3d(0.01, 0, -0.02);
+    return z;
+  };
+  const double E = model_->elastic_energy(x);
+  ASSERT_GT(E, 0);
+  EXPECT_NEAR(model_->elastic_energy(rotated(x)), E, 1e-9 * E);
+  Eigen::VectorXd X = x;
+  for (int i = 0; i < X.size(); ++i) X[i] = model_->mesh().V(i / 3, i % 3);
+  EXPECT_LE(model_->elastic_energy(rotated(X)), 1e-12 * E);
+  Eigen::VectorXd f, v = Eigen::VectorXd::Zero(x.size());
+  for (int i = 0; i < v.size(); ++i) v[i] = std::sin(0.37 * i);
+  model_->internal_forces(x, f);
+  const double h = 1e-7;
+  const double dE = (model_->elastic_energy(x + h * v) - model_->elastic_energy(x - h * v)) / (2 * h);
+  EXPECT_NEAR(dE, f.dot(v), 0.02 * std::abs(f.dot(v)));
 }
 
 // A sphere pressed into the top of a clamped block: no node ends inside it, the tissue pushes

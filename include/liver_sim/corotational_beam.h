@@ -43,6 +43,7 @@ class CorotationalBeams {
   // the element frame is dropped, as for the tetrahedra); from the last update_frames.
   void element_force(int e, Vector12d& f) const;
   void element_tangent(int e, Matrix12d& K) const;
+  double element_energy(int e) const { return 0.5 * local_deformation_[e].dot(local_force_[e]); }  // J
 
   int size() const { return static_cast<int>(L_.size()); }
   const Eigen::MatrixX2i& segments() const { return segments_; }
@@ -55,7 +56,8 @@ class CorotationalBeams {
   std::vector<Eigen::Matrix3d> rest_frame_;  // columns: chord, then two section axes
   std::vector<Matrix12d> K_local_;
   std::vector<Eigen::Matrix3d> frame_;       // current element frame
-  std::vector<Vector12d> local_force_;       // K_local d_local of the last update
+  std::vector<Vector12d> local_deformation_;  // d_local of the last update
+  std::vector<Vector12d> local_force_;        // K_local d_local
 };
 
 }  // namespace liver_sim

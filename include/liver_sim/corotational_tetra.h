@@ -36,6 +36,8 @@ class CorotationalTetra {
   // tangent, using the rotation from the last update_rotations.
   void element_force(int e, const Eigen::VectorXd& x, Vector12d& f) const;
   void element_tangent(int e, Matrix12d& K) const;
+  // Strain energy 1/2 u^T K0 u of the corotated displacement (J), same rotation.
+  double element_energy(int e, const Eigen::VectorXd& x) const;
 
   // Rotation of element e from the last update; rest stiffness; rest volume (m^3).
   const Eigen::Matrix3d& rotation(int e) const { return R_[e]; }
@@ -51,6 +53,8 @@ class CorotationalTetra {
   Eigen::Matrix3d rotation_geometric(int e, const Eigen::VectorXd& x) const;
   Eigen::Matrix3d rotation_polar(int e, const Eigen::VectorXd& x) const;
   Eigen::Matrix3d deformation_gradient(int e, const Eigen::VectorXd& x) const;
+  // R^T x - X per node, relative to node 0, with the rotation of the last update.
+  Vector12d corotated_displacement(int e, const Eigen::VectorXd& x) const;
 
   Eigen::MatrixX4i T_;
   RotationMethod method_;

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -39,8 +40,11 @@ struct StepTiming {
 struct StepResult {
   enum class Status {
     Converged,     // residual below tolerance
-    NotConverged,  // iteration cap reached; the state is kept (it may converge next step)
-    Diverged       // non-finite values or a matrix that is not positive definite: rolled back
+    NotConverged,  // iteration cap reached closer to equilibrium; the state is kept (the next step
+                   // continues from it)
+    Diverged       // rolled back: non-finite values, a tangent that is not positive definite, a
+                   // residual blow-up, a stall (the cap reached no closer to equilibrium than the
+                   // step started), or (dynamic) mechanical energy growing beyond the work done
   };
   Status status = Status::Converged;
   int iterations = 0;         // Newton iterations (factorisations) in this step
@@ -117,11 +121,16 @@ class LiverModel {
 
   // Internal elastic forces (tetrahedra + active membranes + beams) at state x; updates rotations.
   void internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f);
+  // Strain energy of tetrahedra, active membranes and beams at positions x (J); updates rotations.
+  double elastic_energy(const Eigen::VectorXd& x);
   // External forces at positions x (follower pressure on the current triangles), unscaled.
   void external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
 
   // Overwrites the current state (tests start from a given configuration).
-  void set_positions(const Eigen::VectorXd& x) { x_ = x; }
+  void set_positions(const Eigen::VectorXd& x) {
+    x_ = x;
+    state_energy_ = std::numeric_limits<double>::quiet_NaN();
+  }
 
   const SparsePattern& pattern() const { return pattern_; }
   CholmodSolver& linear_solver() { return solver_cholmod_; }
@@ -171,6 +180,10 @@ class LiverModel {
   void update_contacts();
   bool release_tensile_contacts();  // true when a node was released
   void update_probe_reaction();
+  // Dynamic steps: the mechanical energy (kinetic + elastic) and the work of the loads and of
+  // the constraints over the step that ended at x_ (J).
+  double mechanical_energy(const Eigen::VectorXd& x, const Eigen::VectorXd& v);
+  double work_over_step();
   // Tangent of -residual into system_ (fixed DOFs become identity rows), with the element
   // rotations of the last residual() call: the solver always assembles where it last evaluated.
   void assemble_system();
@@ -227,13 +240,14 @@ class LiverModel {
   std::vector<Eigen::Matrix3d> vessel_rotation_;  // per vessel node: its host's rotation
   Eigen::VectorXd vessel_positions_;
   double load_scale_ = 1.0;
+  double state_energy_ = std::numeric_limits<double>::quiet_NaN();  // J, of (x_, v_) when known
   double time_ = 0.0;
   double force_floor_;   // residual (N) below which a state counts as converged: round-off, 1e-12 E L^2
   double length_scale_;  // bounding-box diagonal (m)
   Gmres gmres_;
 
   // Work vectors kept between steps (no allocation per step).
-  Eigen::VectorXd r_, r_try_, dx_, x_try_, f_tmp_, v_tmp_;
+  Eigen::VectorXd r_, r_try_, dx_, x_try_, f_tmp_, v_tmp_, f_ext_, energy_work_;
 };
 
 }  // namespace liver_sim

@@ -26,6 +26,7 @@ class MembraneCST {
   void update_rotations(const Eigen::VectorXd& x);
   void element_force(int e, const Eigen::VectorXd& x, Vector9d& f) const;
   void element_tangent(int e, Matrix9d& K) const;
+  double element_energy(int e, const Eigen::VectorXd& x) const;  // 1/2 u^T K u (J)
 
   // Small-strain corotated in-plane strain, sym(R^T F) - I (2x2) of triangle e, for tests.
   Eigen::Matrix2d corotated_strain(int e, const Eigen::VectorXd& x) const;
@@ -38,6 +39,8 @@ class MembraneCST {
   // Current frame: columns are the two in-plane axes, rotated so that rest 2D coordinates map
   // onto the current triangle (3x2).
   Eigen::Matrix<double, 3, 2> current_frame(int e, const Eigen::VectorXd& x) const;
+  // In-plane displacement in the rotated frame of the last update (6: 2 per node).
+  Eigen::Matrix<double, 6, 1> corotated_displacement(int e, const Eigen::VectorXd& x) const;
 
   Eigen::MatrixX3i F_;
   std::vector<Eigen::Matrix<double, 3, 2>> p_;     // rest 2D coordinates (rows)

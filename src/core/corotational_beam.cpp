@@ -91,6 +91,7 @@ CorotationalBeams::CorotationalBeams(const Eigen::MatrixX3d& X, const Eigen::Mat
   rest_frame_.resize(m);
   K_local_.resize(m);
   frame_.resize(m);
+  local_deformation_.assign(m, Vector12d::Zero());
   local_force_.assign(m, Vector12d::Zero());
   for (int e = 0; e < m; ++e) {
     const Eigen::Vector3d d = X.row(segments(e, 1)) - X.row(segments(e, 0));
@@ -127,6 +128,7 @@ void CorotationalBeams::update_frames(const Eigen::VectorXd& p, const std::vecto
     d.segment<3>(3) = rotation_log(E.transpose() * R[a] * E0);
     d[6] = l - L_[e];
     d.segment<3>(9) = rotation_log(E.transpose() * R[b] * E0);
+    local_deformation_[e] = d;
     local_force_[e] = K_local_[e] * d;
   }
 }

@@ -135,7 +135,7 @@ void CorotationalTetra::update_rotations(const Eigen::VectorXd& x) {
   }
 }
 
-void CorotationalTetra::element_force(int e, const Eigen::VectorXd& x, Vector12d& f) const {
+Vector12d CorotationalTetra::corotated_displacement(int e, const Eigen::VectorXd& x) const {
   const Eigen::Matrix3d& R = R_[e];
   // Displacements relative to node 0 (K0 ignores translations): keeps rounding at the scale of
   // the element, not of the absolute coordinates.
@@ -145,8 +145,17 @@ void CorotationalTetra::element_force(int e, const Eigen::VectorXd& x, Vector12d
   for (int i = 1; i < 4; ++i)
     u.segment<3>(3 * i) = R.transpose() * (node(x, T_(e, i)) - x0) -
                           (X_[e].segment<3>(3 * i) - X_[e].head<3>());
-  const Vector12d f_local = K0_[e] * u;
-  for (int i = 0; i < 4; ++i) f.segment<3>(3 * i) = R * f_local.segment<3>(3 * i);
+  return u;
+}
+
+void CorotationalTetra::element_force(int e, const Eigen::VectorXd& x, Vector12d& f) const {
+  const Vector12d f_local = K0_[e] * corotated_displacement(e, x);
+  for (int i = 0; i < 4; ++i) f.segment<3>(3 * i) = R_[e] * f_local.segment<3>(3 * i);
+}
+
+double CorotationalTetra::element_energy(int e, const Eigen::VectorXd& x) const {
+  const Vector12d u = corotated_displacement(e, x);
+  return 0.5 * u.dot(K0_[e] * u);
 }
 
 void CorotationalTetra::element_tangent(int e, Matrix12d& K) const {

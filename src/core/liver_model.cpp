@@ -164,7 +164,7 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
     probes_.push_back({p.name, at});
   }
 
-  for (Eigen::VectorXd* v : {&r_, &r_try_, &dx_, &x_try_, &f_tmp_, &v_tmp_}) v->setZero(dofs);
+  for (Eigen::VectorXd* v : {&r_, &r_try_, &dx_, &x_try_, &f_tmp_, &v_tmp_, &f_ext_, &energy_work_}) v->setZero(dofs);
 }
 
 LiverModel::EmbeddedPoint LiverModel::locate(const Eigen::Vector3d& p,
@@ -317,6 +317,7 @@ std::string LiverModel::set_capsule(const CapsuleOptions& capsule) {
     for (int f = 0; f < boundary_.rows(); ++f) active[f] = f;
   }
   membrane_.set_material(capsule);
+  state_energy_ = std::numeric_limits<double>::quiet_NaN();
   capsule_active_ = std::move(active);
   capsule_ = capsule;
   factor_valid_ = false;
@@ -329,6 +330,7 @@ int LiverModel::capsule_triangles() const {
 
 void LiverModel::reset() {
   factor_valid_ = false;
+  state_energy_ = std::numeric_limits<double>::quiet_NaN();
   x_ = X_;
   target_ = X_;
   contact_nodes_.clear();
@@ -405,6 +407,41 @@ Eigen::Matrix<double, 12, 24> LiverModel::beam_mapping(int e) const {
     J.block<3, 12>(6 * end + 3, 12 * end) = host_rotation_derivative_[host_index_[at.tet]];
   }
   return J;
+}
+
+double LiverModel::elastic_energy(const Eigen::VectorXd& x) {
+  internal_forces(x, energy_work_);  // brings every rotation and beam frame to x
+  double energy = 0;
+  for (int e = 0; e < tetra_.size(); ++e) energy += tetra_.element_energy(e, x);
+  if (capsule_.enabled)
+    for (int t : capsule_active_) energy += membrane_.element_energy(t, x);
+  for (int e = 0; e < num_beams(); ++e) energy += beams_->element_energy(e);
+  return energy;
+}
+
+double LiverModel::mechanical_energy(const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
+  return 0.5 * v.dot(mass_.cwiseProduct(v)) + elastic_energy(x);
+}
+
+double LiverModel::work_over_step() {
+  // Loads: trapezoid rule between the start and the end of the step. Constraints (a probe; the
+  // scene's fixed nodes do not move): their force at the end, -r at the constrained DOFs, times
+  // the displacement.
+  external_forces(x_start_, f_ext_);
+  external_forces(x_, energy_work_);
+  f_ext_ = 0.5 * load_scale_ * (f_ext_ + energy_work_);
+  if (!contact_nodes_.empty()) {
+    double unused;
+    residual(x_, r_try_, &unused, /*zero_fixed=*/false);
+  }
+  double work = 0;
+  for (int i = 0; i < x_.size(); ++i) {
+    if (!fixed_dof_[i])
+      work += (x_[i] - x_start_[i]) * f_ext_[i];
+    else if (!contact_nodes_.empty())
+      work -= (x_[i] - x_start_[i]) * r_try_[i];
+  }
+  return work;
 }
 
 void LiverModel::external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
@@ -490,6 +527,7 @@ StepResult LiverModel::step() {
   const auto t_step = Clock::now();
   StepResult result;
   x_start_ = x_;  // the last good state, restored if the step diverges
+  const bool dynamic = solver_.mode == SolverOptions::Mode::Dynamic;
   // Sphere probe: constrain the penetrating nodes, solve, release the nodes the probe would have
   // to pull, solve again (a few active-set passes; the next step continues from there).
   for (int pass = 0;; ++pass) {
@@ -498,13 +536,33 @@ StepResult LiverModel::step() {
     if (result.status == StepResult::Status::Diverged || !probe_ || !release_tensile_contacts() || pass == 3)
       break;
   }
+  if (dynamic && result.status != StepResult::Status::Diverged && result.iterations > 0) {
+    // Backward Euler dissipates: the energy cannot exceed what it had plus the work done on it.
+    // A margin of 2 leaves room for the follower loads and the corotational approximation;
+    // what it catches is a runaway. The energy at the start is the last step's end when known.
+    const double energy_before = std::isnan(state_energy_) ? mechanical_energy(x_start_, v_) : state_energy_;
+    v_tmp_ = (x_ - x_start_) / solver_.dt;
+    const double energy_after = mechanical_energy(x_, v_tmp_);
+    const double work = work_over_step();
+    state_energy_ = energy_after;
+    if (!std::isfinite(energy_after) || energy_after > 2 * (energy_before + std::abs(work)) + force_floor_ * length_scale_) {
+      std::ostringstream m;
+      m << "energy growth: " << energy_after << " J after the step, " << energy_before << " J before, work "
+        << work << " J";
+      result.status = StepResult::Status::Diverged;
+      result.message = m.str();
+      state_energy_ = energy_before;
+    }
+  } else {
+    state_energy_ = std::numeric_limits<double>::quiet_NaN();
+  }
   if (result.status == StepResult::Status::Diverged) {
     x_ = x_start_;
     contact_nodes_.clear();  // re-established from the restored state at the next step
     set_fixed(scene_fixed_nodes_);
   }
   update_probe_reaction();  // before the velocity update: the residual needs v_n
-  if (result.status != StepResult::Status::Diverged && solver_.mode == SolverOptions::Mode::Dynamic) {
+  if (result.status != StepResult::Status::Diverged && dynamic) {
     v_ = (x_ - x_start_) / solver_.dt;
     time_ += solver_.dt;
   }
@@ -530,11 +588,20 @@ void LiverModel::newton(StepResult& result) {
   auto t0 = Clock::now();
   double reference = 0;
   double norm = residual(x_, r_, &reference);
+  const double start_merit = merit(norm, x_);
   result.timing.assembly_ms += ms_since(t0);
   result.status = StepResult::Status::NotConverged;
   while (true) {
     if (!std::isfinite(norm)) {
       fail("non-finite residual");
+      break;
+    }
+    // The line search keeps the merit near its start; a millionfold growth means the iteration
+    // has left the basin (possible without line search).
+    if (merit(norm, x_) > 1e6 * std::max(start_merit, force_floor_)) {
+      std::ostringstream m;
+      m << "residual blow-up: " << merit(norm, x_) << " N against " << start_merit << " N at the start of the step";
+      fail(m.str());
       break;
     }
     result.residual = norm / reference;
@@ -548,7 +615,16 @@ void LiverModel::newton(StepResult& result) {
       break;
     }
     if (result.iterations - iterations_before == solver_.max_iterations) {
-      result.message = "iteration cap reached";
+      // Capped but closer to equilibrium: kept, the next step continues (real-time frames).
+      // No closer after all the iterations: stalled, rolled back like a divergence.
+      if (merit(norm, x_) >= start_merit) {
+        std::ostringstream m;
+        m << "stalled: residual " << merit(norm, x_) << " N after " << solver_.max_iterations
+          << " iterations, no lower than the " << start_merit << " N it started from";
+        fail(m.str());
+      } else {
+        result.message = "iteration cap reached";
+      }
       break;
     }
     ++result.iterations;

@@ -85,14 +85,23 @@ void MembraneCST::update_rotations(const Eigen::VectorXd& x) {
   for (int e = 0; e < size(); ++e) frame_[e] = current_frame(e, x);
 }
 
-void MembraneCST::element_force(int e, const Eigen::VectorXd& x, Vector9d& f) const {
+Eigen::Matrix<double, 6, 1> MembraneCST::corotated_displacement(int e, const Eigen::VectorXd& x) const {
   const Eigen::Matrix<double, 3, 2>& A = frame_[e];
   const Eigen::Vector3d x0 = node(x, F_(e, 0));
   Eigen::Matrix<double, 6, 1> u;
   for (int i = 0; i < 3; ++i)
     u.segment<2>(2 * i) = A.transpose() * (node(x, F_(e, i)) - x0) - p_[e].row(i).transpose();
-  const Eigen::Matrix<double, 6, 1> f2 = K2_[e] * u;
-  for (int i = 0; i < 3; ++i) f.segment<3>(3 * i) = A * f2.segment<2>(2 * i);
+  return u;
+}
+
+void MembraneCST::element_force(int e, const Eigen::VectorXd& x, Vector9d& f) const {
+  const Eigen::Matrix<double, 6, 1> f2 = K2_[e] * corotated_displacement(e, x);
+  for (int i = 0; i < 3; ++i) f.segment<3>(3 * i) = frame_[e] * f2.segment<2>(2 * i);
+}
+
+double MembraneCST::element_energy(int e, const Eigen::VectorXd& x) const {
+  const Eigen::Matrix<double, 6, 1> u = corotated_displacement(e, x);
+  return 0.5 * u.dot(K2_[e] * u);
 }
 
 void MembraneCST::element_tangent(int e, Matrix9d& K) const {

@@ -1,0 +1,246 @@
+// Numerical stress matrix: the aspiration cube pushed to extreme parameters, time steps, loads
+// and meshes. Each case must end converged, or be detected as diverging and rolled back to the
+// exact state before the step, with nothing non-finite left in the model.
+//   stress [--quick] [--scene FILE] [--csv FILE]
+// Prints a Markdown table on standard output, progress on standard error. Exit status 0 when
+// every case ended acceptably, 1 otherwise, 2 on a bad command line.
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <functional>
+#include <iomanip>
+#include <iostream>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "liver_sim/liver_model.h"
+
+namespace {
+
+using namespace liver_sim;
+
+struct Case {
+  std::string group, name;
+  std::vector<std::string> overrides;             // on the aspiration scene
+  std::function<TetMesh(const Scene&)> mesh;      // default: the scene's
+  std::function<void(LiverModel&)> prepare;       // e.g. an inverted start
+  int steps = 1;                                  // dynamic: time steps
+  bool quick = false;                             // part of the reduced run in the tests
+};
+
+struct Outcome {
+  std::string result;  // converged | detected | FAILED
+  std::string detail;
+  int steps = 0, newton = 0, factorizations = 0;
+  double residual = 0, max_u = 0, ms = 0;
+  int inverted_start = 0, inverted_end = 0;
+  double min_quality = 0;
+};
+
+int count_inverted(const LiverModel& m) {
+  TetMesh current{m.mesh().V, m.mesh().T};
+  const Eigen::VectorXd& x = m.positions();
+  for (int i = 0; i < current.V.rows(); ++i) current.V.row(i) = x.segment<3>(3 * i).transpose();
+  return static_cast<int>(check_mesh(current).inverted.size());
+}
+
+// Shape quality 6 sqrt(2) V / l_max^3: 1 for a regular tetrahedron, 0 for a flat one.
+double min_quality(const TetMesh& mesh) {
+  double q = 1;
+  for (int t = 0; t < mesh.T.rows(); ++t) {
+    double l = 0;
+    for (int a = 0; a < 4; ++a)
+      for (int b = a + 1; b < 4; ++b) l = std::max(l, (mesh.V.row(mesh.T(t, a)) - mesh.V.row(mesh.T(t, b))).norm());
+    q = std::min(q, 6 * std::sqrt(2.0) * signed_volume(mesh.V, mesh.T, t) / (l * l * l));
+  }
+  return q;
+}
+
+// Interior nodes moved randomly by up to `amplitude` x the grid spacing; a move that would make
+// an element inverted or flatter than `floor` is halved until it does not.
+TetMesh perturbed_box(const Scene& s, double amplitude, double floor) {
+  TetMesh mesh = make_box_mesh(s.mesh.box_size, s.mesh.box_divisions);
+  const double h = s.mesh.box_size[0] / s.mesh.box_divisions[0];
+  std::vector<std::vector<int>> incident(mesh.V.rows());
+  for (int t = 0; t < mesh.T.rows(); ++t)
+    for (int k = 0; k < 4; ++k) incident[mesh.T(t, k)].push_back(t);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const Eigen::Vector3d lo = mesh.V.colwise().minCoeff(), hi = mesh.V.colwise().maxCoeff();
+  for (int i = 0; i < mesh.V.rows(); ++i) {
+    const Eigen::Vector3d p = mesh.V.row(i).transpose();
+    if (((p - lo).array() < 1e-12).any() || ((hi - p).array() < 1e-12).any()) continue;
+    Eigen::Vector3d d(u(rng), u(rng), u(rng));
+    d *= amplitude * h / d.norm();
+    for (int tries = 0; tries < 8; ++tries, d *= 0.5) {
+      mesh.V.row(i) = (p + d).transpose();
+      bool ok = true;
+      for (int t : incident[i]) {
+        double l = 0;
+        for (int a = 0; a < 4; ++a)
+          for (int b = a + 1; b < 4; ++b) l = std::max(l, (mesh.V.row(mesh.T(t, a)) - mesh.V.row(mesh.T(t, b))).norm());
+        ok &= signed_volume(mesh.V, mesh.T, t) > floor * l * l * l;
+      }
+      if (ok) break;
+      mesh.V.row(i) = p.transpose();
+    }
+  }
+  return mesh;
+}
+
+// Folds the part of the body above z = plane down through that plane, squashed to half its
+// height: the elements there are inverted (F = diag(1, 1, -1/2)); the solver must unfold them
+// or report.
+std::function<void(LiverModel&)> fold_above(double plane) {
+  return [plane](LiverModel& m) {
+    Eigen::VectorXd x = m.positions();
+    for (int i = 2; i < x.size(); i += 3)
+      if (x[i] > plane) x[i] = plane - 0.5 * (x[i] - plane);
+    m.set_positions(x);
+  };
+}
+
+Outcome run(const Case& c, const std::string& scene_path) {
+  Outcome o;
+  const Scene scene = load_scene(scene_path, c.overrides);
+  TetMesh mesh;
+  try {
+    mesh = c.mesh ? c.mesh(scene) : load_scene_mesh(scene);
+    validate_mesh(mesh, "mesh");
+  } catch (const MeshError& e) {
+    o.result = "refused";
+    o.detail = e.what();
+    return o;
+  }
+  o.min_quality = min_quality(mesh);
+  LiverModel m(std::move(mesh), scene);
+  if (c.prepare) c.prepare(m);
+  o.inverted_start = count_inverted(m);
+  const bool dynamic = scene.solver.mode == SolverOptions::Mode::Dynamic;
+  // Static: more steps while one ends at the iteration cap closer to equilibrium (the next
+  // continues from there), at most 10 (500 Newton iterations).
+  const int budget = dynamic ? c.steps : 10;
+  const auto t0 = std::chrono::steady_clock::now();
+  o.result = "FAILED";
+  for (int k = 0; k < budget; ++k) {
+    const Eigen::VectorXd before = m.positions();
+    const StepResult r = m.step();
+    ++o.steps;
+    o.newton += r.iterations;
+    o.factorizations += r.factorizations;
+    o.residual = r.residual;
+    if (!m.positions().allFinite()) {
+      o.detail = "non-finite state after a step";
+      break;
+    }
+    if (r.status == StepResult::Status::Diverged) {
+      const bool restored = (m.positions() - before).cwiseAbs().maxCoeff() == 0;
+      o.result = restored ? "detected" : "FAILED";
+      o.detail = r.message + (restored ? ", rolled back" : ", NOT rolled back");
+      break;
+    }
+    if (r.converged()) {
+      o.result = "converged";
+      o.detail.clear();
+      if (!dynamic) break;
+    } else {
+      o.result = "FAILED";
+      o.detail = "not converged: " + r.message;
+    }
+  }
+  o.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  o.max_u = m.max_displacement();
+  o.inverted_end = count_inverted(m);
+  return o;
+}
+
+std::vector<Case> cases() {
+  std::vector<Case> v;
+  for (double ratio : {1.0, 1e2, 1e4, 1e6}) {
+    std::ostringstream n;
+    n << "E_c / E_p = " << ratio;
+    v.push_back({"capsule stiffness", n.str(), {"capsule.young_modulus=" + std::to_string(3500 * ratio)}, {}, {}, 1, ratio == 1e6});
+  }
+  for (const char* nu : {"0.3", "0.45", "0.49", "0.499"})
+    v.push_back({"Poisson ratio", std::string("nu = ") + nu, {std::string("parenchyma.poisson_ratio=") + nu}, {}, {}, 1,
+                 std::string(nu) == "0.499"});
+  for (const char* dt : {"1e-5", "1e-3", "0.1", "1"})
+    v.push_back({"time step", std::string("dt = ") + dt + " s, 10 steps",
+                 {"solver.mode=dynamic", std::string("solver.dt=") + dt, "solver.rayleigh_stiffness=0.02"}, {}, {}, 10,
+                 std::string(dt) == "1e-5" || std::string(dt) == "1"});
+  for (double f : {0.125, 0.25, 0.5}) {
+    std::ostringstream n;
+    n << "top " << f * 100 << "% folded through (inverted start)";
+    v.push_back({"inversion", n.str(), {}, {}, fold_above(0.015 * (1 - f)), 1, f == 0.125});
+  }
+  v.push_back({"inversion", "top 50% folded, dynamic dt = 5 ms, 10 steps", {"solver.mode=dynamic", "solver.dt=0.005"}, {},
+               fold_above(0.0075), 10, false});
+  for (double a : {0.3, 0.45}) {
+    std::ostringstream n;
+    n << "interior nodes moved by " << a << " h (slivers)";
+    v.push_back({"element quality", n.str(), {}, [a](const Scene& s) { return perturbed_box(s, a, 1e-4); }, {}, 1, a == 0.45});
+  }
+  v.push_back({"element quality", "moves down to quality 1e-7 (near-degenerate)", {},
+               [](const Scene& s) { return perturbed_box(s, 0.49, 1e-7); }, {}, 1, false});
+  v.push_back({"100 kPa step", "suction -100 kPa, static", {"loads.0.value=-1e5"}, {}, {}, 1, true});
+  v.push_back({"100 kPa step", "pressure +100 kPa, static", {"loads.0.value=1e5"}, {}, {}, 1, false});
+  v.push_back({"100 kPa step", "suction -100 kPa, dynamic dt = 5 ms, 10 steps",
+               {"loads.0.value=-1e5", "solver.mode=dynamic", "solver.dt=0.005"}, {}, {}, 10, false});
+  v.push_back({"100 kPa step", "pressure +100 kPa, no line search, static", {"loads.0.value=1e5", "solver.line_search=false"},
+               {}, {}, 1, true});
+  return v;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  bool quick = false;
+  std::string scene = LIVER_SIM_ASPIRATION_SCENE, csv;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--quick") {
+      quick = true;
+    } else if (a == "--scene" && i + 1 < argc) {
+      scene = argv[++i];
+    } else if (a == "--csv" && i + 1 < argc) {
+      csv = argv[++i];
+    } else {
+      std::cerr << "usage: stress [--quick] [--scene FILE] [--csv FILE]\n";
+      return 2;
+    }
+  }
+  std::ofstream csv_out;
+  if (!csv.empty()) {
+    csv_out.open(csv);
+    csv_out << "group,case,result,steps,newton,factorizations,residual,max_displacement_m,inverted_start,inverted_end,min_quality,ms,detail\n";
+  }
+  std::cout << "| group | case | result | steps | Newton | factorisations | residual | max displacement (mm) | inverted start → end | min quality | time (ms) | detail |\n"
+            << "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+  int failed = 0;
+  const std::vector<Case> all = cases();
+  for (size_t k = 0; k < all.size(); ++k) {
+    const Case& c = all[k];
+    if (quick && !c.quick) continue;
+    std::cerr << "[" << k + 1 << "/" << all.size() << "] " << c.group << ": " << c.name << "\n";
+    Outcome o;
+    try {
+      o = run(c, scene);
+    } catch (const std::exception& e) {
+      o.result = "FAILED";
+      o.detail = std::string("exception: ") + e.what();
+    }
+    failed += o.result == "FAILED";
+    std::cout << std::setprecision(3) << "| " << c.group << " | " << c.name << " | " << o.result << " | " << o.steps << " | "
+              << o.newton << " | " << o.factorizations << " | " << o.residual << " | " << o.max_u * 1e3 << " | "
+              << o.inverted_start << " → " << o.inverted_end << " | " << o.min_quality << " | " << std::setprecision(4)
+              << o.ms << " | " << o.detail << " |\n";
+    if (csv_out)
+      csv_out << c.group << ",\"" << c.name << "\"," << o.result << "," << o.steps << "," << o.newton << "," << o.factorizations
+              << "," << o.residual << "," << o.max_u << "," << o.inverted_start << "," << o.inverted_end << "," << o.min_quality
+              << "," << o.ms << ",\"" << o.detail << "\"\n";
+  }
+  std::cerr << (failed ? std::to_string(failed) + " case(s) FAILED\n" : "every case converged or was detected and rolled back\n");
+  return failed ? 1 : 0;
+}
