@@ -1,0 +1,265 @@
+#!/usr/bin/python3
+"""Soak test of a running liver_sim_node: point clouds at 30 Hz (100,000 points), instrument
+poses at 1 kHz (the probe pressing and circling on the phantom's right lobe) and a service call
+every second, for a given time. Every 100th pose is NaN, every 30th cloud empty and every other
+set_capsule call out of range: the node must refuse and count them and keep going.
+
+Reports: messages sent and handled, RSS of the node at start (after a warm-up) and end, status
+messages and the largest gap between them, the node's simulation frames against the frames its
+rate asks for (dropped frames), pose-to-mesh latency early and late (a growing queue would make
+it grow), refused inputs. Exits 1 when a check fails: the node died, the status stopped for more
+than 2 s, RSS grew by more than 10% + 20 MB, latency grew, a NaN was published, refused inputs
+do not match.
+
+usage: scripts/soak.py [--duration S] [--points N] [--json FILE]      (a master and the node running)
+       scripts/soak.sh [S]                                            (starts both, pinned; 600 s default)
+       test/soak.test                                                 (rostest: 30 s, --rostest)
+"""
+import argparse
+import json
+import math
+import os
+import sys
+import threading
+import time
+
+import numpy as np
+import rospy
+from geometry_msgs.msg import PoseStamped
+from liver_sim.msg import SimulationStatus
+from liver_sim.srv import SetCapsule
+from sensor_msgs import point_cloud2
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Header
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker
+
+SURFACE_Z = 0.039   # m, sagged surface of the phantom's right lobe under the probe
+RADIUS = 0.008      # m, launch file's probe radius
+
+
+def node_pid():
+    for pid in os.listdir("/proc"):
+        if pid.isdigit():
+            try:
+                with open("/proc/%s/cmdline" % pid, "rb") as f:
+                    if b"liver_sim_node" in f.read().split(b"\0")[0]:
+                        return int(pid)
+            except OSError:
+                pass
+    return None
+
+
+def rss_mb(pid):
+    with open("/proc/%d/status" % pid) as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+class Soak:
+    def __init__(self, duration, points):
+        self.duration = duration
+        self.node_rate = rospy.get_param("liver_sim/rate", 30.0)
+        self.lock = threading.Lock()
+        self.sent = {"poses": 0, "nan_poses": 0, "clouds": 0, "empty_clouds": 0, "service_calls": 0,
+                     "refused_service_calls": 0, "resets": 0}
+        self.status = []          # (receive wall time, msg)
+        self.latency = []         # (receive wall time, pose stamp -> mesh marker, s)
+        self.meshes = 0
+        self.nan_published = False
+        rng = np.random.default_rng(0)
+        xyz = np.column_stack([rng.uniform(0.0, 0.1, points), rng.uniform(-0.05, 0.03, points),
+                               rng.uniform(0.02, 0.06, points)]).astype(np.float32)
+        self.cloud = point_cloud2.create_cloud_xyz32(Header(frame_id="liver"), xyz)
+        self.empty = point_cloud2.create_cloud_xyz32(Header(frame_id="liver"), [])
+        self.pose_pub = rospy.Publisher("instrument_pose", PoseStamped, queue_size=1)
+        self.cloud_pub = rospy.Publisher("points", PointCloud2, queue_size=1)
+        rospy.Subscriber("liver_sim/status", SimulationStatus, self.on_status, queue_size=100)
+        rospy.Subscriber("liver_sim/mesh", Marker, self.on_mesh, queue_size=2)
+
+    def on_status(self, m):
+        with self.lock:
+            self.status.append((time.monotonic(), m))
+            if not all(math.isfinite(v) for v in (m.rate, m.step_time, m.residual, m.max_displacement)):
+                self.nan_published = True
+
+    def on_mesh(self, m):
+        now = rospy.Time.now()
+        with self.lock:
+            self.meshes += 1
+            if m.header.stamp.to_sec() > 0:
+                self.latency.append((time.monotonic(), (now - m.header.stamp).to_sec()))
+            if any(not (math.isfinite(p.x) and math.isfinite(p.y) and math.isfinite(p.z)) for p in m.points[::97]):
+                self.nan_published = True
+
+    def poses(self, stop):
+        rate = rospy.Rate(1000)
+        t0 = time.monotonic()
+        while not stop.is_set() and not rospy.is_shutdown():
+            t = time.monotonic() - t0
+            p = PoseStamped(header=Header(stamp=rospy.Time.now(), frame_id="liver"))
+            # Circles of 3 mm at 0.5 Hz, pressing 3-5 mm.
+            p.pose.position.x = 0.05 + 0.003 * math.cos(math.pi * t)
+            p.pose.position.y = -0.02 + 0.003 * math.sin(math.pi * t)
+            p.pose.position.z = SURFACE_Z + RADIUS - 0.004 - 0.001 * math.sin(0.3 * t)
+            p.pose.orientation.w = 1.0
+            self.sent["poses"] += 1
+            if self.sent["poses"] % 100 == 0:
+                p.pose.position.x = float("nan")
+                self.sent["nan_poses"] += 1
+            self.pose_pub.publish(p)
+            rate.sleep()
+
+    def clouds(self, stop):
+        rate = rospy.Rate(30)
+        while not stop.is_set() and not rospy.is_shutdown():
+            self.sent["clouds"] += 1
+            msg = self.cloud
+            if self.sent["clouds"] % 30 == 0:
+                msg = self.empty
+                self.sent["empty_clouds"] += 1
+            msg.header.stamp = rospy.Time.now()
+            self.cloud_pub.publish(msg)
+            rate.sleep()
+
+    def services(self, stop):
+        set_capsule = rospy.ServiceProxy("liver_sim/set_capsule", SetCapsule)
+        reset = rospy.ServiceProxy("liver_sim/reset", Trigger)
+        k = 0
+        while not stop.wait(1.0):
+            k += 1
+            if k % 10 == 0:
+                reset()
+                self.sent["resets"] += 1
+            elif k % 2:
+                r = set_capsule(True, 3.0e6 if k % 4 == 1 else 4.0e6, 93e-6, 0.45)  # valid: E alternates
+                self.sent["service_calls"] += 1
+                if not r.success:
+                    raise RuntimeError("valid set_capsule refused: " + r.message)
+            else:
+                r = set_capsule(True, -1.0, 93e-6, 0.45)  # out of range: refused
+                self.sent["service_calls"] += 1
+                self.sent["refused_service_calls"] += not r.success
+
+    def run(self):
+        rospy.wait_for_service("liver_sim/set_capsule", 60)
+        pid = node_pid()
+        if pid is None:
+            raise RuntimeError("no liver_sim_node process")
+        deadline = time.monotonic() + 60
+        while not self.status and time.monotonic() < deadline:
+            time.sleep(0.1)
+        stop = threading.Event()
+        threads = [threading.Thread(target=f, args=(stop,), daemon=True) for f in (self.poses, self.clouds, self.services)]
+        for t in threads:
+            t.start()
+        warmup = min(10.0, 0.1 * self.duration)
+        time.sleep(warmup)
+        with self.lock:
+            rejected_start = self.status[-1][1].rejected_inputs
+        sent_start = dict(self.sent)
+        rss_start = rss_mb(pid)
+        t_start = time.monotonic()
+        next_report = t_start + 60
+        while time.monotonic() - t_start < self.duration - warmup:
+            time.sleep(0.5)
+            if time.monotonic() >= next_report:
+                next_report += 60
+                print("soak: %.0f s, RSS %.1f MB, %d statuses" % (time.monotonic() - t_start + warmup, rss_mb(pid),
+                                                                     len(self.status)), file=sys.stderr)
+        rss_end = rss_mb(pid) if os.path.exists("/proc/%d" % pid) else float("nan")
+        t_end = time.monotonic()
+        stop.set()
+        for t in threads:
+            t.join(5)
+        return self.report(pid, sent_start, rejected_start, rss_start, rss_end, t_start, t_end)
+
+    def report(self, pid, sent_start, rejected_start, rss_start, rss_end, t_start, t_end):
+        with self.lock:
+            window = [(t, m) for t, m in self.status if t_start <= t <= t_end]
+            gaps = [b[0] - a[0] for a, b in zip(window, window[1:])]
+            lat = [(t, l) for t, l in self.latency if t_start <= t <= t_end]
+        span = t_end - t_start
+        third = span / 3
+        early = [l for t, l in lat if t < t_start + third]
+        late = [l for t, l in lat if t >= t_end - third]
+        sent = {k: self.sent[k] - sent_start[k] for k in self.sent}
+        last = window[-1][1] if window else None
+        # Frames: the loop asks for ~rate frames per second; a step that takes longer than a
+        # frame makes the loop miss frames, which the node's achieved rate shows.
+        rates = [m.rate for _, m in window if m.rate > 0]
+        achieved = float(np.mean(rates)) if rates else 0.0
+        r = {
+            "duration_s": round(span, 1),
+            "node_alive": os.path.exists("/proc/%d" % pid),
+            "sent": sent,
+            "rss_mb": {"start": round(rss_start, 1), "end": round(rss_end, 1)},
+            "status_messages": len(window),
+            "status_max_gap_s": round(max(gaps), 3) if gaps else None,
+            "mesh_markers": len(lat),
+            "latency_s": {"early_median": round(float(np.median(early)), 3) if early else None,
+                          "late_median": round(float(np.median(late)), 3) if late else None,
+                          "max": round(max(l for _, l in lat), 3) if lat else None},
+            "frames": {"asked_hz": self.node_rate, "achieved_mean_hz": round(achieved, 2),
+                       "dropped": int(round(max(0.0, self.node_rate - achieved) * span)),
+                       "done": int(round(achieved * span))},
+            "refused_inputs_counted": (last.rejected_inputs - rejected_start) if last else None,
+            "nan_published": self.nan_published,
+        }
+        checks = {
+            "node alive": r["node_alive"],
+            "status kept flowing (gap <= 2 s)": bool(gaps) and max(gaps) <= 2.0,
+            "memory flat (end <= 1.1 start + 20 MB)": rss_end <= 1.1 * rss_start + 20,
+            "no growing queue (late latency <= 2 x early + 0.2 s)": bool(early) and bool(late)
+            and np.median(late) <= 2 * np.median(early) + 0.2,
+            "no NaN published": not self.nan_published,
+            "refused inputs counted (all refused service calls, at most every invalid message)":
+                last is not None and sent["refused_service_calls"] <= r["refused_inputs_counted"]
+                <= sent["refused_service_calls"] + sent["nan_poses"] + sent["empty_clouds"] + 2,
+        }
+        r["checks"] = {k: bool(v) for k, v in checks.items()}
+        return r
+
+
+def rostest_main(duration):
+    import unittest
+
+    import rostest
+
+    class SoakTest(unittest.TestCase):
+        def test_node_survives_soak(self):
+            report = Soak(duration, 100000).run()
+            print(json.dumps(report, indent=2))
+            for check, ok in report["checks"].items():
+                self.assertTrue(ok, check + ": " + json.dumps(report))
+
+    rospy.init_node("liver_sim_soak_test")
+    rostest.rosrun("liver_sim", "soak", SoakTest)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--duration", type=float, default=600.0, help="seconds (default 600)")
+    ap.add_argument("--points", type=int, default=100000, help="points per cloud")
+    ap.add_argument("--json", help="also write the report here")
+    ap.add_argument("--rostest", action="store_true", help="run as a rostest test node")
+    args, _ = ap.parse_known_args(rospy.myargv()[1:])  # rostest adds --gtest_output=...
+    if args.rostest:
+        return rostest_main(args.duration)
+    rospy.init_node("liver_sim_soak", anonymous=True)
+    report = Soak(args.duration, args.points).run()
+    text = json.dumps(report, indent=2)
+    print(text)
+    if args.json:
+        with open(args.json, "w") as f:
+            f.write(text + "\n")
+    failed = [k for k, ok in report["checks"].items() if not ok]
+    for k in failed:
+        print("soak: FAILED: " + k, file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
