@@ -5,8 +5,9 @@
                                     lobes with a flattened inferior face
   config/phantom/portal.vtk         portal vein tree (legacy VTK polydata: radius, wall_thickness)
   config/phantom/hepatic.vtk        hepatic vein tree
-  config/phantom/sofa_liver2_portal.vtk  a portal-like tree inside the external SOFA liver2 mesh
-                                    (../shared/data/sofa-liver, scale 0.1), when that is present
+  config/phantom/sofa_liver_portal.vtk, sofa_liver2_portal.vtk
+                                    portal-like trees inside the two external SOFA liver meshes
+                                    (../shared/data/sofa-liver, scales 0.03 and 0.1), when present
 
 Run: scripts/make_phantom.sh (installs python3-gmsh if missing). The scene that uses these
 files, with the tumour targets and the ligament attachments, is config/scenes/liver_phantom.yaml.
@@ -183,9 +184,9 @@ class MeshInside:
         return all(self.contains(p + o) for o in offsets)
 
 
-def sofa_portal_tree(path):
-    """A tree from the middle of the SOFA liver2 mesh toward both ends of the organ."""
-    inside = MeshInside(path, 0.1)
+def sofa_portal_tree(path, scale):
+    """A tree from the middle of a SOFA liver mesh toward both ends of the organ."""
+    inside = MeshInside(path, scale)
     t = Tree(inside)
     root = t.node(inside.centroid, 0.005)
     t.branch(root, (1.0, 0.2, 0.1), 0.035, 0.0045, 3, 0.0)
@@ -201,11 +202,13 @@ def main():
     os.makedirs(args.out, exist_ok=True)
     tets = make_mesh(os.path.join(args.out, "liver_phantom.msh"))
     trees = [("portal", portal_tree()), ("hepatic", hepatic_tree())]
-    sofa = os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", "..", "shared", "data", "sofa-liver", "liver2.msh")
-    if os.path.exists(sofa):
-        trees.append(("sofa_liver2_portal", sofa_portal_tree(sofa)))
-    else:
-        print("skipped the SOFA liver2 tree: %s not found" % sofa)
+    sofa = os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", "..", "shared", "data", "sofa-liver")
+    for mesh, scale in (("liver", 0.03), ("liver2", 0.1)):  # file units -> m, as in the tests
+        path = os.path.join(sofa, mesh + ".msh")
+        if os.path.exists(path):
+            trees.append(("sofa_%s_portal" % mesh, sofa_portal_tree(path, scale)))
+        else:
+            print("skipped the SOFA %s tree: %s not found" % (mesh, path))
     for name, tree in trees:
         tree.write_vtk(os.path.join(args.out, name + ".vtk"), name + " vein tree of the liver phantom")
         print("%s: %d nodes, %d segments" % (name, len(tree.points), len(tree.segments)))
