@@ -2,11 +2,8 @@
 # Headless rviz screenshot of a demo playback (for the README): records the demo bag, plays it
 # into the node with rviz on a virtual X display, captures doc/playback.png mid-press.
 # Needs: apt-get install rviz xvfb xauth imagemagick x11-utils libgl1-mesa-dri; a built workspace.
-set -euo pipefail
-REPO=$(cd "$(dirname "$0")/.." && pwd)
-export PATH="/usr/bin:/bin:$PATH" ROS_IP=127.0.0.1 ROS_MASTER_URI=http://127.0.0.1:11499
-export ROS_HOME="$REPO/build/ws/ros_home" DISPLAY=:99
-set +u; source "$REPO/build/ws/devel/setup.bash"; set -u
+source "$(dirname "$0")/ros_env.sh" 11499
+export DISPLAY=:99
 BAG="$REPO/build/demo.bag"
 "$REPO/scripts/record_demo_bag.py" "$BAG"
 Xvfb :99 -screen 0 1280x800x24 >/dev/null 2>&1 & XVFB=$!

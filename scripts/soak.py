@@ -7,9 +7,10 @@ set_capsule call out of range: the node must refuse and count them and keep goin
 Reports: messages sent and handled, RSS of the node at start (after a warm-up) and end, status
 messages and the largest gap between them, the node's simulation frames against the frames its
 rate asks for (dropped frames), pose-to-mesh latency early and late (a growing queue would make
-it grow), refused inputs. Exits 1 when a check fails: the node died, the status stopped for more
-than 2 s, RSS grew by more than 10% + 20 MB, latency grew, a NaN was published, refused inputs
-do not match.
+it grow), refused inputs. Exits 1 when a check fails: the node died, the status stopped (none
+in one half of the run, or a gap over 2 s), RSS grew by more than 10% + 20 MB, latency grew, a
+NaN was published, refused inputs do not match. As a rostest (--rostest) only the checks that
+do not depend on wall-clock speed are asserted; the others are printed.
 
 usage: scripts/soak.py [--duration S] [--points N] [--json FILE]      (a master and the node running)
        scripts/soak.sh [S]                                            (starts both, pinned; 600 s default)
@@ -208,17 +209,24 @@ class Soak:
             "refused_inputs_counted": (last.rejected_inputs - rejected_start) if last else None,
             "nan_published": self.nan_published,
         }
+        halves = [sum(1 for t, _ in window if t < t_start + span / 2), sum(1 for t, _ in window if t >= t_start + span / 2)]
         checks = {
             "node alive": r["node_alive"],
-            "status kept flowing (gap <= 2 s)": bool(gaps) and max(gaps) <= 2.0,
+            "status kept flowing (messages in both halves of the run)": min(halves) > 0,
             "memory flat (end <= 1.1 start + 20 MB)": rss_end <= 1.1 * rss_start + 20,
-            "no growing queue (late latency <= 2 x early + 0.2 s)": bool(early) and bool(late)
-            and np.median(late) <= 2 * np.median(early) + 0.2,
             "no NaN published": not self.nan_published,
             "refused inputs counted (all refused service calls, at most every invalid message)":
                 last is not None and sent["refused_service_calls"] <= r["refused_inputs_counted"]
                 <= sent["refused_service_calls"] + sent["nan_poses"] + sent["empty_clouds"] + 2,
         }
+        # Wall-clock checks: judged by the standalone soak (scripts/soak.sh, a quiet pinned
+        # machine), reported but not asserted by the 30 s rostest (shared, noisy, or sanitized).
+        timing = {
+            "status gaps <= 2 s": bool(gaps) and max(gaps) <= 2.0,
+            "no growing queue (late latency <= 2 x early + 0.2 s)": bool(early) and bool(late)
+            and np.median(late) <= 2 * np.median(early) + 0.2,
+        }
+        r["timing_checks"] = {k: bool(v) for k, v in timing.items()}
         r["checks"] = {k: bool(v) for k, v in checks.items()}
         return r
 
@@ -255,7 +263,7 @@ def main():
     if args.json:
         with open(args.json, "w") as f:
             f.write(text + "\n")
-    failed = [k for k, ok in report["checks"].items() if not ok]
+    failed = [k for k, ok in list(report["checks"].items()) + list(report["timing_checks"].items()) if not ok]
     for k in failed:
         print("soak: FAILED: " + k, file=sys.stderr)
     return 1 if failed else 0

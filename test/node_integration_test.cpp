@@ -15,8 +15,11 @@
 
 #include "liver_sim/SetCapsule.h"
 #include "liver_sim/SimulationStatus.h"
+#include "wait_for.h"
 
 namespace {
+
+using liver_sim_test::wait_for;
 
 class Node : public ::testing::Test {
  protected:
@@ -51,17 +54,6 @@ class Node : public ::testing::Test {
   static void on_mesh(const visualization_msgs::Marker::ConstPtr& m) {
     mesh_ = *m;
     ++mesh_count_;
-  }
-
-  // Spins until pred holds or `seconds` of wall time pass.
-  static bool wait_for(const std::function<bool()>& pred, double seconds) {
-    const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(seconds);
-    while (ros::ok() && ros::WallTime::now() < end) {
-      ros::spinOnce();
-      if (pred()) return true;
-      ros::WallDuration(0.01).sleep();
-    }
-    return false;
   }
 
   // Waits for the model to settle after an input sent at `sent`: an idle status stamped well

@@ -11,22 +11,15 @@
 
 #include "liver_sim/SimulationStatus.h"
 #include "liver_sim/liver_model.h"
+#include "wait_for.h"
 
 namespace {
+
+using liver_sim_test::wait_for;
 
 liver_sim::SimulationStatus status;
 visualization_msgs::Marker mesh, vessels;
 int status_count = 0, mesh_count = 0, vessel_count = 0;
-
-bool wait_for(const std::function<bool()>& pred, double seconds) {
-  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(seconds);
-  while (ros::ok() && ros::WallTime::now() < end) {
-    ros::spinOnce();
-    if (pred()) return true;
-    ros::WallDuration(0.01).sleep();
-  }
-  return false;
-}
 
 TEST(PhantomNode, PublishesTheEquilibriumOfTheCoreModelWithVessels) {
   ros::NodeHandle nh;

@@ -8,17 +8,10 @@
 #include <fstream>
 
 #include "liver_sim/liver_model.h"
+#include "regions.h"
 
 namespace liver_sim {
 namespace {
-
-Region box(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
-  Region r;
-  r.kind = Region::Kind::Box;
-  r.min = lo;
-  r.max = hi;
-  return r;
-}
 
 // A block [0,L]x[0,b]x[0,h] clamped at x = 0 or z = 0, linear-elastic regime.
 Scene block_scene(double E, double nu) {

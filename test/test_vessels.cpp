@@ -10,6 +10,7 @@
 
 #include "liver_sim/corotational_beam.h"
 #include "liver_sim/liver_model.h"
+#include "regions.h"
 #include "liver_sim/vessel_tree.h"
 
 namespace liver_sim {
@@ -245,14 +246,6 @@ TEST(CorotationalBeam, EndMomentBendsIntoCircularArc) {
 }
 
 // --- Beams embedded in a soft block ---------------------------------------------------------
-
-Region box(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
-  Region r;
-  r.kind = Region::Kind::Box;
-  r.min = lo;
-  r.max = hi;
-  return r;
-}
 
 std::string write_file(const std::string& name, const std::string& text) {
   const std::string path = ::testing::TempDir() + name;
