@@ -43,6 +43,9 @@ class Node : public ::testing::Test {
         << "no status or mesh from liver_sim";
   }
   static void TearDownTestSuite() {
+    // Before roscpp shuts down at exit: static handles destroyed after it read freed memory.
+    status_sub_ = wrench_sub_ = mesh_sub_ = ros::Subscriber();
+    pose_pub_ = cloud_pub_ = ros::Publisher();
     tf_broadcaster_.reset();
     nh_.reset();
   }
@@ -61,7 +64,9 @@ class Node : public ::testing::Test {
   // must not count).
   static liver_sim::SimulationStatus settled(ros::Time sent = ros::Time::now()) {
     const ros::Time after = sent + ros::Duration(0.15);
-    EXPECT_TRUE(wait_for([&] { return status_.header.stamp > after && status_.state == "idle"; }, 20.0))
+    // Generous: a 4 mm press takes about 2 s of solving here in Release, ten times that under
+    // the sanitizers. The bound only ends a wait; it asserts no speed.
+    EXPECT_TRUE(wait_for([&] { return status_.header.stamp > after && status_.state == "idle"; }, 90.0))
         << "state " << status_.state;
     return status_;
   }
