@@ -47,8 +47,6 @@ class CorotationalBeams {
 
   int size() const { return static_cast<int>(L_.size()); }
   const Eigen::MatrixX2i& segments() const { return segments_; }
-  double rest_length(int e) const { return L_[e]; }
-  const Matrix12d& local_stiffness(int e) const { return K_local_[e]; }
 
  private:
   Eigen::MatrixX2i segments_;

@@ -110,7 +110,7 @@ class LiverModel {
   // Vessels: beam nodes, beams (node pairs), the vessel each beam belongs to, current positions.
   int num_vessel_nodes() const { return static_cast<int>(vessel_nodes_.size()); }
   int num_beams() const { return beams_ ? beams_->size() : 0; }
-  const Eigen::MatrixX2i& beam_segments() const { return beams_->segments(); }
+  const Eigen::MatrixX2i& beam_segments() const { return beams_->segments(); }  // only when num_beams() > 0
   int beam_vessel(int e) const { return beam_vessel_[e]; }
   const std::string& vessel_name(int v) const { return vessel_names_[v]; }
   Eigen::Vector3d vessel_node_position(int k) const { return interpolate(x_, vessel_nodes_[k]); }
