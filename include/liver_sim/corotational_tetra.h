@@ -13,6 +13,9 @@ namespace liver_sim {
 using Matrix12d = Eigen::Matrix<double, 12, 12>;
 using Vector12d = Eigen::Matrix<double, 12, 1>;
 
+// The matrix of w x . (cross product with w).
+Eigen::Matrix3d cross_matrix(const Eigen::Vector3d& w);
+
 // Rotation of the polar decomposition F = R S (a proper rotation also for inverted F).
 Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F);
 // d theta / d x (3 x 12): the spatial rotation increment of R = polar_rotation(F) per change of
@@ -46,13 +49,16 @@ class CorotationalTetra {
   int size() const { return static_cast<int>(K0_.size()); }
   const Eigen::MatrixX4i& elements() const { return T_; }
 
+  // Inverse rest edge matrix [X1-X0, X2-X0, X3-X0]^-1, and F = [x1-x0, x2-x0, x3-x0] times it.
+  const Eigen::Matrix3d& rest_edge_inverse(int e) const { return Dm_inv_[e]; }
+  Eigen::Matrix3d deformation_gradient(int e, const Eigen::VectorXd& x) const;
+
   // Strain in the element's rotated frame, sym(R^T F) - I (Voigt-free 3x3), for tests and output.
   Eigen::Matrix3d corotated_strain(int e, const Eigen::VectorXd& x) const;
 
  private:
   Eigen::Matrix3d rotation_geometric(int e, const Eigen::VectorXd& x) const;
   Eigen::Matrix3d rotation_polar(int e, const Eigen::VectorXd& x) const;
-  Eigen::Matrix3d deformation_gradient(int e, const Eigen::VectorXd& x) const;
   // R^T x - X per node, relative to node 0, with the rotation of the last update.
   Vector12d corotated_displacement(int e, const Eigen::VectorXd& x) const;
 

@@ -154,14 +154,12 @@ class LiverModel {
     std::vector<int> nodes;
   };
 
-  // The tetrahedron that contains p best (largest smallest barycentric weight); `inverse_edges`
-  // are the inverse rest edge matrices of all tetrahedra.
-  EmbeddedPoint locate(const Eigen::Vector3d& p, const std::vector<Eigen::Matrix3d>& inverse_edges) const;
+  // The tetrahedron that contains p best (largest smallest barycentric weight).
+  EmbeddedPoint locate(const Eigen::Vector3d& p) const;
   Eigen::Vector3d interpolate(const Eigen::VectorXd& x, const EmbeddedPoint& q) const;
   // Loads and embeds the enabled vessel trees; returns the 8 tissue nodes each beam couples
   // (the 4 of each end's tetrahedron).
-  std::vector<std::vector<int>> embed_vessels(const std::vector<VesselOptions>& vessels,
-                                              const std::vector<Eigen::Matrix3d>& inverse_edges);
+  std::vector<std::vector<int>> embed_vessels(const std::vector<VesselOptions>& vessels);
   // Host rotations and their derivatives, beam-node positions, then the beam forces.
   void add_beam_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f);
   // J of beam e: its [p_a theta_a p_b theta_b] with respect to its 8 tissue nodes.
@@ -230,12 +228,11 @@ class LiverModel {
   std::optional<CorotationalBeams> beams_;
   std::vector<int> beam_vessel_;
   std::vector<std::string> vessel_names_;
-  // Tetrahedra that host vessel nodes: index per tetrahedron (-1: none), and per host its inverse
-  // rest edge matrix, current rotation and rotation derivative (3 x 12: d theta / d x) from the
-  // last force call.
+  // Tetrahedra that host vessel nodes: index per tetrahedron (-1: none), and per host its current
+  // polar rotation and rotation derivative (3 x 12: d theta / d x) from the last force call.
   std::vector<int> host_index_;
   std::vector<int> hosts_;
-  std::vector<Eigen::Matrix3d> host_inverse_edges_, host_rotation_;
+  std::vector<Eigen::Matrix3d> host_rotation_;
   std::vector<Eigen::Matrix<double, 3, 12>> host_rotation_derivative_;
   std::vector<Eigen::Matrix3d> vessel_rotation_;  // per vessel node: its host's rotation
   Eigen::VectorXd vessel_positions_;

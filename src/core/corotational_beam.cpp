@@ -8,12 +8,6 @@
 namespace liver_sim {
 namespace {
 
-Eigen::Matrix3d skew(const Eigen::Vector3d& w) {
-  Eigen::Matrix3d W;
-  W << 0, -w.z(), w.y(), w.z(), 0, -w.x(), -w.y(), w.x(), 0;
-  return W;
-}
-
 // Linear Euler-Bernoulli beam along local x, DOFs [u1 v1 w1 tx1 ty1 tz1 u2 v2 w2 tx2 ty2 tz2].
 Matrix12d local_beam_stiffness(double L, const BeamSection& s) {
   const double E = s.young_modulus, G = E / (2 * (1 + s.poisson_ratio));
@@ -51,7 +45,7 @@ Eigen::Vector3d orthogonal_part(const Eigen::Vector3d& q, const Eigen::Vector3d&
 
 Eigen::Matrix3d rotation_exp(const Eigen::Vector3d& w) {
   const double a = w.norm();
-  const Eigen::Matrix3d W = skew(w);
+  const Eigen::Matrix3d W = cross_matrix(w);
   if (a < 1e-8) return Eigen::Matrix3d::Identity() + W + 0.5 * W * W;
   return Eigen::Matrix3d::Identity() + std::sin(a) / a * W + (1 - std::cos(a)) / (a * a) * W * W;
 }
@@ -66,7 +60,7 @@ Eigen::Vector3d rotation_log(const Eigen::Matrix3d& R) {
 
 Eigen::Matrix3d left_jacobian(const Eigen::Vector3d& w) {
   const double a = w.norm();
-  const Eigen::Matrix3d W = skew(w);
+  const Eigen::Matrix3d W = cross_matrix(w);
   if (a < 1e-6) return Eigen::Matrix3d::Identity() + 0.5 * W + W * W / 6.0;
   return Eigen::Matrix3d::Identity() + (1 - std::cos(a)) / (a * a) * W + (a - std::sin(a)) / (a * a * a) * W * W;
 }

@@ -100,25 +100,26 @@ Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F) {
   return U * V.transpose();
 }
 
+Eigen::Matrix3d cross_matrix(const Eigen::Vector3d& w) {
+  Eigen::Matrix3d W;
+  W << 0, -w.z(), w.y(), w.z(), 0, -w.x(), -w.y(), w.x(), 0;
+  return W;
+}
+
 Eigen::Matrix<double, 3, 12> polar_rotation_derivative(const Eigen::Matrix3d& R, const Eigen::Matrix3d& F,
                                                       const Eigen::Matrix3d& Dm_inv) {
   // F = R S: the skew part of R^T dF is (tr(S) I - S) w for the material rotation increment w
   // (dR = R [w]x), and dF = sum_k dx_k b_k^T, so w = (tr(S) I - S)^-1 sum_k b_k x (R^T dx_k).
   const Eigen::Matrix3d RtF = R.transpose() * F;
   const Eigen::Matrix3d S = 0.5 * (RtF + RtF.transpose());
-  const Eigen::Matrix3d A = (S.trace() * Eigen::Matrix3d::Identity() - S).inverse();
+  const Eigen::Matrix3d RA = R * (S.trace() * Eigen::Matrix3d::Identity() - S).inverse();
   Eigen::Matrix<double, 3, 12> G;
-  Eigen::Vector3d b0 = Eigen::Vector3d::Zero();
-  for (int k = 1; k < 4; ++k) {
-    const Eigen::Vector3d b = Dm_inv.row(k - 1).transpose();
-    b0 -= b;
-    Eigen::Matrix3d B;
-    B << 0, -b.z(), b.y(), b.z(), 0, -b.x(), -b.y(), b.x(), 0;
-    G.block<3, 3>(0, 3 * k) = R * A * B * R.transpose();
+  for (int k = 0; k < 4; ++k) {
+    // Shape-function gradients: rows of Dm_inv for nodes 1-3, minus their sum for node 0.
+    const Eigen::Vector3d b = k == 0 ? Eigen::Vector3d(-Dm_inv.colwise().sum().transpose())
+                                     : Eigen::Vector3d(Dm_inv.row(k - 1).transpose());
+    G.block<3, 3>(0, 3 * k) = RA * cross_matrix(b) * R.transpose();
   }
-  Eigen::Matrix3d B0;
-  B0 << 0, -b0.z(), b0.y(), b0.z(), 0, -b0.x(), -b0.y(), b0.x(), 0;
-  G.block<3, 3>(0, 0) = R * A * B0 * R.transpose();
   return G;
 }
 

@@ -64,13 +64,7 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
       tetra_(mesh_.V, mesh_.T, parenchyma_),
       membrane_(mesh_.V, boundary_, capsule_) {
   const int n = static_cast<int>(mesh_.V.rows());
-  std::vector<Eigen::Matrix3d> inverse_edges(mesh_.T.rows());
-  for (int e = 0; e < mesh_.T.rows(); ++e) {
-    Eigen::Matrix3d Dm;
-    for (int k = 0; k < 3; ++k) Dm.col(k) = (mesh_.V.row(mesh_.T(e, k + 1)) - mesh_.V.row(mesh_.T(e, 0))).transpose();
-    inverse_edges[e] = Dm.inverse();
-  }
-  const std::vector<std::vector<int>> beam_groups = embed_vessels(scene.vessels, inverse_edges);
+  const std::vector<std::vector<int>> beam_groups = embed_vessels(scene.vessels);
   const int dofs = 3 * n;
   pattern_ = SparsePattern(n, mesh_.T, beam_groups);
   on_boundary_.assign(n, 0);
@@ -158,7 +152,7 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
 
   for (const ProbeOptions& p : scene.probes) {
     if (!p.point.allFinite()) throw std::invalid_argument("probe '" + p.name + "': point must be finite");
-    const EmbeddedPoint at = locate(p.point, inverse_edges);
+    const EmbeddedPoint at = locate(p.point);
     // Points on a curved surface may sit a little outside the faceted mesh.
     if (at.barycentric.minCoeff() < -0.05) throw std::invalid_argument("probe '" + p.name + "' lies outside the mesh");
     probes_.push_back({p.name, at});
@@ -167,12 +161,11 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
   for (Eigen::VectorXd* v : {&r_, &r_try_, &dx_, &x_try_, &f_tmp_, &v_tmp_, &f_ext_, &energy_work_}) v->setZero(dofs);
 }
 
-LiverModel::EmbeddedPoint LiverModel::locate(const Eigen::Vector3d& p,
-                                             const std::vector<Eigen::Matrix3d>& inverse_edges) const {
+LiverModel::EmbeddedPoint LiverModel::locate(const Eigen::Vector3d& p) const {
   EmbeddedPoint best;
   double best_min = -std::numeric_limits<double>::infinity();
   for (int e = 0; e < mesh_.T.rows(); ++e) {
-    const Eigen::Vector3d w = inverse_edges[e] * (p - mesh_.V.row(mesh_.T(e, 0)).transpose());
+    const Eigen::Vector3d w = tetra_.rest_edge_inverse(e) * (p - mesh_.V.row(mesh_.T(e, 0)).transpose());
     const Eigen::Vector4d b(1 - w.sum(), w[0], w[1], w[2]);
     if (b.minCoeff() > best_min) {
       best_min = b.minCoeff();
@@ -188,8 +181,7 @@ Eigen::Vector3d LiverModel::interpolate(const Eigen::VectorXd& x, const Embedded
   return p;
 }
 
-std::vector<std::vector<int>> LiverModel::embed_vessels(const std::vector<VesselOptions>& vessels,
-                                                        const std::vector<Eigen::Matrix3d>& inverse_edges) {
+std::vector<std::vector<int>> LiverModel::embed_vessels(const std::vector<VesselOptions>& vessels) {
   const Eigen::VectorXd rest_x = flatten(mesh_.V);
   std::vector<Eigen::Vector3d> rest;
   std::vector<Eigen::Vector2i> segments;
@@ -207,7 +199,7 @@ std::vector<std::vector<int>> LiverModel::embed_vessels(const std::vector<Vessel
     const int base = num_vessel_nodes();
     for (int i = 0; i < tree.points.rows(); ++i) {
       const Eigen::Vector3d p = tree.points.row(i).transpose();
-      EmbeddedPoint at = locate(p, inverse_edges);
+      EmbeddedPoint at = locate(p);
       if (at.barycentric.minCoeff() < 0) {
         // Outside the faceted surface: onto the nearest point of the best tetrahedron's span
         // (clamped weights), if that is within the tolerance.
@@ -250,7 +242,6 @@ std::vector<std::vector<int>> LiverModel::embed_vessels(const std::vector<Vessel
     if (host_index_[p.tet] >= 0) continue;
     host_index_[p.tet] = static_cast<int>(hosts_.size());
     hosts_.push_back(p.tet);
-    host_inverse_edges_.push_back(inverse_edges[p.tet]);
   }
   host_rotation_.assign(hosts_.size(), Eigen::Matrix3d::Identity());
   host_rotation_derivative_.assign(hosts_.size(), Eigen::Matrix<double, 3, 12>::Zero());
@@ -373,12 +364,9 @@ void LiverModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
 
 void LiverModel::add_beam_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
   for (size_t h = 0; h < hosts_.size(); ++h) {
-    const int e = hosts_[h];
-    Eigen::Matrix3d Ds;
-    for (int k = 0; k < 3; ++k) Ds.col(k) = x.segment<3>(3 * mesh_.T(e, k + 1)) - x.segment<3>(3 * mesh_.T(e, 0));
-    const Eigen::Matrix3d F = Ds * host_inverse_edges_[h];
+    const Eigen::Matrix3d F = tetra_.deformation_gradient(hosts_[h], x);
     host_rotation_[h] = polar_rotation(F);
-    host_rotation_derivative_[h] = polar_rotation_derivative(host_rotation_[h], F, host_inverse_edges_[h]);
+    host_rotation_derivative_[h] = polar_rotation_derivative(host_rotation_[h], F, tetra_.rest_edge_inverse(hosts_[h]));
   }
   for (int k = 0; k < num_vessel_nodes(); ++k) {
     vessel_positions_.segment<3>(3 * k) = interpolate(x, vessel_nodes_[k]);
@@ -596,11 +584,12 @@ void LiverModel::newton(StepResult& result) {
       fail("non-finite residual");
       break;
     }
+    const double current_merit = merit(norm, x_);
     // The line search keeps the merit near its start; a millionfold growth means the iteration
     // has left the basin (possible without line search).
-    if (merit(norm, x_) > 1e6 * std::max(start_merit, force_floor_)) {
+    if (current_merit > 1e6 * std::max(start_merit, force_floor_)) {
       std::ostringstream m;
-      m << "residual blow-up: " << merit(norm, x_) << " N against " << start_merit << " N at the start of the step";
+      m << "residual blow-up: " << current_merit << " N against " << start_merit << " N at the start of the step";
       fail(m.str());
       break;
     }
@@ -617,9 +606,9 @@ void LiverModel::newton(StepResult& result) {
     if (result.iterations - iterations_before == solver_.max_iterations) {
       // Capped but closer to equilibrium: kept, the next step continues (real-time frames).
       // No closer after all the iterations: stalled, rolled back like a divergence.
-      if (merit(norm, x_) >= start_merit) {
+      if (current_merit >= start_merit) {
         std::ostringstream m;
-        m << "stalled: residual " << merit(norm, x_) << " N after " << solver_.max_iterations
+        m << "stalled: residual " << current_merit << " N after " << solver_.max_iterations
           << " iterations, no lower than the " << start_merit << " N it started from";
         fail(m.str());
       } else {
@@ -658,8 +647,7 @@ void LiverModel::newton(StepResult& result) {
     // are as large as the material stiffness and make a plain modified Newton crawl.
     t0 = Clock::now();
     // A factorisation costs far more than a GMRES iteration: solve each linearisation well.
-    const double merit0 = merit(norm, x_);
-    const double forcing = std::clamp(0.1 * solver_.tolerance * reference / merit0, 1e-6, 0.1);
+    const double forcing = std::clamp(0.1 * solver_.tolerance * reference / current_merit, 1e-6, 0.1);
     // Constrained rows are identity with the remaining gap on the right-hand side, so that the
     // free nodes follow the prescribed ones in the same linear solve (consistent lifting).
     for (int i = 0; i < r_.size(); ++i)
@@ -699,7 +687,7 @@ void LiverModel::newton(StepResult& result) {
       x_try_ = x_ + alpha * dx_;
       const double n_try = residual(x_try_, r_try_, &ref_try);
       const double m_try = merit(n_try, x_try_);
-      const bool merit_falls = m_try <= (1.0 - 1e-4 * alpha) * merit0;
+      const bool merit_falls = m_try <= (1.0 - 1e-4 * alpha) * current_merit;
       const bool potential_falls = std::isfinite(m_try) && slope0 > 0 && r_try_.dot(dx_) >= -0.5 * slope0;
       if (merit_falls || potential_falls || m_try < best_merit) {
         best_merit = m_try;
