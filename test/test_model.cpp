@@ -286,41 +286,6 @@ TEST_F(Aspiration, ElasticEnergyIsRotationInvariantAndItsGradientIsTheForce) {
   EXPECT_NEAR(dE, f.dot(v), 0.02 * std::abs(f.dot(v)));
 }
 
-// A sphere pressed into the top of a clamped block: no node ends inside it, the tissue pushes
-// it back up, the torque about its centre vanishes by symmetry, and the block springs back when
-// the probe is withdrawn.
-TEST(ModelProbe, SpherePressedIntoBlockHoldsSurfaceAndReportsReaction) {
-  const double L = 0.02, r = 0.004;
-  Scene s = block_scene(3000, 0.45);
-  s.fixed.push_back(box({-1, -1, -1}, {1, 1, 0}));
-  LiverModel m(make_box_mesh({L, L, L}, {8, 8, 8}), s);
-  const Eigen::Vector3d centre(L / 2, L / 2, L + r - 0.002);  // 2 mm indentation
-  m.set_sphere_probe(centre, r);
-  const StepResult res = m.step();
-  ASSERT_TRUE(res.converged()) << res.message << " residual " << res.residual << " iterations " << res.iterations;
-  const LiverModel::ProbeReaction reaction = m.probe_reaction();
-  EXPECT_GT(reaction.contacts, 0);
-  EXPECT_GT(reaction.force.z(), 0.0) << "the tissue pushes the probe back";
-  EXPECT_LE(std::hypot(reaction.force.x(), reaction.force.y()), 1e-6 * reaction.force.z());
-  EXPECT_LE(reaction.torque.norm(), 1e-6 * reaction.force.z() * r);
-  const Eigen::VectorXd& x = m.positions();
-  for (int i = 0; i < x.size() / 3; ++i)
-    ASSERT_GE((x.segment<3>(3 * i) - centre).norm(), r * (1 - 1e-9)) << "node " << i << " inside the probe";
-
-  // Deeper indentation, larger force.
-  m.set_sphere_probe(centre - Eigen::Vector3d(0, 0, 0.001), r);
-  ASSERT_TRUE(m.step().converged());
-  EXPECT_GT(m.probe_reaction().force.z(), reaction.force.z());
-
-  m.remove_sphere_probe();
-  const StepResult back = m.step();
-  ASSERT_TRUE(back.converged()) << back.message << " residual " << back.residual;
-  EXPECT_LE(m.displacement().cwiseAbs().maxCoeff(), 1e-9 * L);
-  EXPECT_EQ(m.probe_reaction().contacts, 0);
-  EXPECT_THROW(m.set_sphere_probe(centre, 0.0), std::invalid_argument);
-  EXPECT_THROW(m.set_sphere_probe(Eigen::Vector3d(std::nan(""), 0, 0), r), std::invalid_argument);
-}
-
 TEST(ModelValidation, ClearErrorsForBadSetups) {
   const TetMesh mesh = make_box_mesh({0.01, 0.01, 0.01}, {2, 2, 2});
   auto message = [&](const Scene& s) -> std::string {

@@ -161,6 +161,53 @@ TEST(Scene, LoadsFilesResolvingRelativeMeshPaths) {
   }
 }
 
+TEST(Scene, InstrumentsTrajectoriesAndContact) {
+  const std::string yaml = std::string(kMinimal) + R"(
+instruments:
+  - {name: tip, type: probe, radius: 0.004, pose: {position: [0, 0, 0.05]}}
+  - name: jaws
+    type: grasper
+    radius: 0.003
+    trajectory:
+      - {t: 0, position: [0, 0, 0.03], closed: true}
+      - {t: 1, position: [0, 0, 0.04], orientation: [0, 0, 0.7071068, 0.7071068]}
+  - {name: tube, type: tube, inner_radius: 0.005, outer_radius: 0.0065, length: 0.02, suction: 3000,
+     pose: {position: [0, 0, 0.03], orientation: [1, 0, 0, 0]}}
+contact: {friction: 0.3, alarm_distance: 0.001, tolerance: 1e-8, max_iterations: 200}
+)";
+  const Scene s = parse_scene(yaml, "/base", "scene.yaml");
+  ASSERT_EQ(s.instruments.size(), 3u);
+  EXPECT_EQ(s.instruments[0].type, InstrumentOptions::Type::Probe);
+  EXPECT_EQ(s.instruments[0].radius, 0.004);
+  EXPECT_EQ(s.instruments[0].position, Eigen::Vector3d(0, 0, 0.05));
+  ASSERT_EQ(s.instruments[1].trajectory.size(), 2u);
+  EXPECT_TRUE(*s.instruments[1].trajectory[0].closed);
+  EXPECT_FALSE(s.instruments[1].trajectory[1].closed.has_value());
+  EXPECT_NEAR(s.instruments[1].trajectory[1].orientation.w(), std::sqrt(0.5), 1e-7);
+  EXPECT_EQ(s.instruments[2].suction, 3000);
+  EXPECT_EQ(s.instruments[2].orientation.x(), 1.0);
+  EXPECT_EQ(s.contact.friction, 0.3);
+  EXPECT_EQ(s.contact.alarm_distance, 0.001);
+  EXPECT_EQ(s.contact.max_iterations, 200);
+  EXPECT_EQ(parse_scene(yaml, "/base", "scene.yaml", {"instruments.2.suction=1000"}).instruments[2].suction, 1000);
+
+  auto instrument_error = [](const std::string& item) {
+    return error_of(std::string(kMinimal) + "instruments:\n  - " + item + "\n");
+  };
+  EXPECT_NE(instrument_error("{name: a, type: probe, radius: 0, pose: {position: [0, 0, 0]}}").find("instruments.a.radius"), std::string::npos);
+  EXPECT_NE(instrument_error("{name: a, type: probe, radius: -1, pose: {position: [0, 0, 0]}}").find("radius"), std::string::npos);
+  EXPECT_NE(instrument_error("{name: a, type: laser, pose: {position: [0, 0, 0]}}").find("instruments.0.type"), std::string::npos);
+  EXPECT_NE(instrument_error("{name: a, type: probe}").find("needs a pose or a trajectory"), std::string::npos);
+  EXPECT_NE(instrument_error("{name: a, type: probe, pose: {position: [0, 0, .nan]}}").find("must be finite"), std::string::npos);
+  EXPECT_NE(instrument_error("{name: a, type: probe, pose: {position: [0, 0, 0], orientation: [0, 0, 0, 0]}}").find("non-zero"), std::string::npos);
+  EXPECT_NE(instrument_error("{name: a, type: probe, inner_radius: 1, pose: {position: [0, 0, 0]}}").find("unknown key 'instruments.0.inner_radius'"), std::string::npos);
+  EXPECT_NE(instrument_error("{name: a, type: probe, trajectory: [{t: 1, position: [0, 0, 0]}, {t: 1, position: [0, 0, 1]}]}").find("increase"), std::string::npos);
+  EXPECT_NE(instrument_error("{name: a, type: probe, trajectory: [{t: 0, position: [0, 0, 0], closed: true}]}").find("only a grasper"), std::string::npos);
+  EXPECT_NE(instrument_error("{name: a, type: tube, inner_radius: 0.006, outer_radius: 0.005, pose: {position: [0, 0, 0]}}").find("outer_radius"), std::string::npos);
+  EXPECT_NE(error_of(std::string(kMinimal) + "contact: {friction: -0.1}\n").find("contact.friction"), std::string::npos);
+  EXPECT_NE(error_of(std::string(kMinimal) + "contact: {tolerance: 0}\n").find("contact.tolerance"), std::string::npos);
+}
+
 TEST(Region, ContainsEachKindFacesIncluded) {
   Region box;
   box.kind = Region::Kind::Box;

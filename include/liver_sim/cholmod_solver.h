@@ -26,6 +26,8 @@ class CholmodSolver {
 
   // x = A^-1 b with the last successful factor.
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x);
+  // X = A^-1 B, all columns in one pass over the factor.
+  void solve(const Eigen::MatrixXd& B, Eigen::MatrixXd& X);
 
   bool analyzed() const { return factor_ != nullptr; }
   bool factorized() const { return factorized_; }
@@ -36,6 +38,7 @@ class CholmodSolver {
   int factorizations() const { return factorizations_; }
 
  private:
+  void solve_columns(const double* b, long columns);  // into x_
   cholmod_common common_;
   cholmod_sparse A_{};       // views the caller's arrays
   cholmod_factor* factor_ = nullptr;

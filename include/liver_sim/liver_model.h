@@ -11,6 +11,8 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/LU>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -21,6 +23,7 @@
 #include "liver_sim/corotational_beam.h"
 #include "liver_sim/corotational_tetra.h"
 #include "liver_sim/gmres.h"
+#include "liver_sim/instrument.h"
 #include "liver_sim/membrane_cst.h"
 #include "liver_sim/mesh.h"
 #include "liver_sim/scene.h"
@@ -34,6 +37,7 @@ struct StepTiming {
   double assembly_ms = 0;       // rotation update, internal/external forces, tangent assembly
   double factorization_ms = 0;  // CHOLMOD numeric factorisations
   double solve_ms = 0;          // GMRES: triangular solves and Jacobian products
+  double contact_ms = 0;        // detection, compliance columns, Delassus operator, Gauss-Seidel
   double total_ms = 0;
 };
 
@@ -50,6 +54,8 @@ struct StepResult {
   int iterations = 0;         // Newton iterations (factorisations) in this step
   int linear_iterations = 0;  // GMRES iterations (preconditioned solves) in this step
   int factorizations = 0;     // numeric factorisations in this step (often 0: the factor is reused)
+  int contacts = 0;           // instrument contacts carrying force at the end of the step
+  int contact_sweeps = 0;     // Gauss-Seidel sweeps of the contact solves in this step
   double residual = 0;      // force residual relative to the load norm, at the end
   StepTiming timing;
   std::string message;      // why, when not converged
@@ -68,7 +74,9 @@ class LiverModel {
   LiverModel(TetMesh mesh, const Scene& scene);
 
   // Static mode: Newton to equilibrium under the loads times load_scale(). Dynamic mode: one
-  // backward-Euler time step of solver.dt. A diverging step restores the state before it.
+  // backward-Euler time step of solver.dt. Both advance time() by solver.dt (in static mode a
+  // pseudo-time that drives the instruments' trajectories). A diverging step restores the
+  // state before it.
   StepResult step();
 
   // Static load continuation: loads are multiplied by this factor (default 1).
@@ -80,22 +88,36 @@ class LiverModel {
   std::string set_capsule(const CapsuleOptions& capsule);
   const CapsuleOptions& capsule() const { return capsule_; }
 
-  // A rigid sphere probe (centre and radius in m) in sticking contact with the boundary: at each
-  // step the boundary nodes inside it are moved onto its surface (along their inward normal) and
-  // held there, and nodes the probe would have to pull are released (exact constraint forces,
-  // no penalty; the frictional NLCP contact of the instruments replaces it). Throws
-  // std::invalid_argument for a non-finite centre or a radius <= 0.
-  void set_sphere_probe(const Eigen::Vector3d& centre, double radius);
-  void remove_sphere_probe();
-  struct ProbeReaction {
-    Eigen::Vector3d force = Eigen::Vector3d::Zero();   // N, exerted by the tissue on the probe
-    Eigen::Vector3d torque = Eigen::Vector3d::Zero();  // N m, about the sphere centre
-    int contacts = 0;                                  // nodes held by the probe
+  // Instruments (instrument.h): rigid and pose-driven, in unilateral contact with Coulomb
+  // friction with the boundary nodes, or holding them (a closed grasper). The contact forces are
+  // exact at convergence: each Newton iteration solves the frictional contact problem on the
+  // Delassus operator W = H A^-1 H^T, with A the factorised Newton matrix (no penalty). The
+  // scene's instruments are added by the constructor. add/update throw std::invalid_argument
+  // naming the field at fault (validate(InstrumentOptions)); a change acts at the next step.
+  int add_instrument(const InstrumentOptions& o);
+  void update_instrument(int i, const InstrumentOptions& o);
+  int num_instruments() const { return static_cast<int>(instruments_.size()); }
+  const InstrumentOptions& instrument(int i) const { return instruments_[i].options; }
+  int find_instrument(const std::string& name) const;  // -1 when there is none
+  const Eigen::Isometry3d& instrument_pose(int i) const { return instruments_[i].pose; }  // at the last step
+  struct InstrumentReaction {
+    Eigen::Vector3d force = Eigen::Vector3d::Zero();   // N, exerted by the tissue on the instrument
+    Eigen::Vector3d torque = Eigen::Vector3d::Zero();  // N m, about the instrument's tip
+    int contacts = 0;                                  // nodes pressing on it or held by it
   };
-  const ProbeReaction& probe_reaction() const { return probe_reaction_; }
+  const InstrumentReaction& instrument_reaction(int i) const { return instruments_[i].reaction; }
+  const ContactOptions& contact_options() const { return contact_; }
+  // Work counters since construction: contact problems solved and compliance columns A^-1 e_i
+  // computed. Both stay 0 while no instrument comes within the alarm distance.
+  long contact_solves() const { return contact_solves_; }
+  long compliance_columns() const { return compliance_columns_; }
+  // Contact force on the tissue per DOF (N), from the last step.
+  const Eigen::VectorXd& contact_forces() const { return contact_force_; }
+  // Force the supports exert on the tissue at the scene's fixed DOFs (N; 0 elsewhere).
+  Eigen::VectorXd support_forces();
 
-  // Back to the rest shape, zero velocity, time 0; parameters are kept (a probe stays set but
-  // holds nothing until the next step).
+  // Back to the rest shape, zero velocity, time 0; parameters and instruments are kept (a
+  // grasper lets go; it grasps again at the next step if it is still closed).
   void reset();
 
   const TetMesh& mesh() const { return mesh_; }
@@ -171,13 +193,27 @@ class LiverModel {
   // Returns its free-DOF norm and the reference norm it is measured against.
   // With zero_fixed = false the entries at fixed DOFs are kept: minus the constraint forces.
   double residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference, bool zero_fixed = true);
-  // Line-search merit: the free residual norm and the gap to prescribed positions, in newtons.
+  // Line-search merit: the free residual norm and the contact violation, in newtons.
   double merit(double residual_norm, const Eigen::VectorXd& x) const;
   // Newton iterations from the current state; adds to result (iterations, timings, status).
   void newton(StepResult& result);
-  void update_contacts();
-  bool release_tensile_contacts();  // true when a node was released
-  void update_probe_reaction();
+  // Instruments to their pose at time t; grasps and releases; the tubes' suction triangles.
+  // Returns the stages the step needs: travel over a quarter of an instrument's size, each.
+  int move_instruments(double t);
+  // The contacts at x: nodes within the alarm distance of an instrument and held nodes, with
+  // their forces carried over from the previous contacts. True when a dropped contact carried force.
+  bool detect_contacts(const Eigen::VectorXd& x);
+  // Normal gap and tangential slips (bilateral: position error) of contact c at x (m), and
+  // its frame (columns: normal, tangents).
+  Eigen::Vector3d contact_rows(int c, const Eigen::VectorXd& x, Eigen::Matrix3d* frame) const;
+  // Largest violation of Signorini, sticking and holding at x with the current forces (m).
+  double contact_violation(const Eigen::VectorXd& x) const;
+  // The Newton update dx_ with instruments: the frictional contact problem on the Delassus
+  // operator decides which contacts stick, slide or separate; then GMRES solves the Jacobian
+  // system with those contact rows. Sets the contacts' forces; returns the GMRES iterations.
+  int contact_update(const std::function<void(const Eigen::VectorXd&, Eigen::VectorXd&)>& jacobian, double forcing,
+                     StepResult& result);
+  void update_reactions();
   // Dynamic steps: the mechanical energy (kinetic + elastic) and the work of the loads and of
   // the constraints over the step that ended at x_ (J).
   double mechanical_energy(const Eigen::VectorXd& x, const Eigen::VectorXd& v);
@@ -203,22 +239,55 @@ class LiverModel {
   std::vector<int> scene_fixed_nodes_;
   std::vector<char> fixed_by_scene_;  // per node
   std::vector<int> boundary_nodes_;
-  struct SphereProbe {
-    Eigen::Vector3d centre;
-    double radius;
+  struct Instrument {
+    InstrumentOptions options;
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();        // at the end of the step
+    Eigen::Isometry3d pose_start = Eigen::Isometry3d::Identity();  // at its start
+    bool closed = false;
+    bool was_enabled = false;                  // at the last step
+    std::vector<int> held;                     // grasper: held nodes
+    std::vector<Eigen::Vector3d> held_local;   // and where, in the grasper's frame
+    int suction_load = -1;                     // tube: its entry of pressures_
+    InstrumentReaction reaction;
   };
-  std::optional<SphereProbe> probe_;
-  std::vector<int> contact_nodes_;
-  std::vector<int> constrained_nodes_;  // work vector of update_contacts: scene-fixed + contacts
-  Eigen::VectorXd node_normal_;  // work vector of update_contacts
-  std::vector<char> released_;  // per node, within the current step
-  ProbeReaction probe_reaction_;
+  struct Contact {
+    int instrument;
+    int node;
+    bool bilateral;
+    Eigen::Matrix3d frame;  // columns: normal, tangent, tangent (bilateral: identity)
+    Eigen::Vector3d rows;   // contact_rows at the current iterate
+    Eigen::Vector3d force;  // N on the tissue node, world frame
+  };
+  std::vector<Instrument> instruments_;
+  std::vector<Eigen::Isometry3d> stage_from_, stage_to_;
+  Eigen::VectorXd x_stage_;  // positions at the start of the stage: slips are measured from them
+  ContactOptions contact_;
+  std::vector<Contact> contacts_, contacts_next_;
+  Eigen::VectorXd contact_force_, contact_force_start_;  // per DOF (N), now and at the step's start
+  std::vector<int> compliance_slot_;  // per node: its 3 columns in compliance_, or -1
+  Eigen::MatrixXd compliance_;        // A^-1 columns of contact nodes, for factor compliance_factor_
+  std::vector<int> compliance_nodes_; // nodes stored, by slot
+  int compliance_factor_ = -1;
+  long contact_solves_ = 0, compliance_columns_ = 0;
+  Eigen::MatrixXd delassus_, rhs_columns_, new_columns_;
+  Eigen::VectorXd contact_delta_, contact_lambda_;
+  std::vector<char> contact_bilateral_;
+  std::vector<int> missing_nodes_;
+  struct ContactUnknown {  // one force unknown of the Newton update with contacts
+    int contact;
+    Eigen::Vector3d row;     // its constraint row at the node (dx . row = target)
+    Eigen::Vector3d force;   // the force per unit unknown on the node
+    double target;
+  };
+  std::vector<ContactUnknown> unknown_rows_;
+  Eigen::MatrixXd schur_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> schur_lu_;
+  Eigen::VectorXd augmented_rhs_, augmented_solution_, augmented_dx_, augmented_out_, schur_rhs_;
   std::vector<char> fixed_dof_, fixed_next_;
   bool factor_valid_ = false;  // the factor preconditions the current constraint set and material
   CholmodSolver solver_cholmod_;
 
   Eigen::VectorXd X_, x_, v_, x_start_;
-  Eigen::VectorXd target_;  // prescribed positions of fixed DOFs (rest, or on the probe)
   Eigen::VectorXd mass_;  // lumped, per DOF (kg)
   std::vector<PressureLoad> pressures_;
   std::vector<NodalLoad> nodal_loads_;  // spread forces

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <optional>
 #include <string>
 #include <vector>
@@ -71,11 +72,53 @@ struct ProbeOptions {
   Eigen::Vector3d point = Eigen::Vector3d::Zero();  // rest position (m)
 };
 
+// A rigid instrument in unilateral frictional contact with the tissue surface (contact.h).
+// Local frame: the origin is the tip (probe: sphere centre; shaft: centre of the tip hemisphere;
+// tube: centre of the opening; grasper: centre of the jaws) and +z runs back along the
+// instrument, away from the tissue it touches.
+struct InstrumentOptions {
+  enum class Type {
+    Probe,    // sphere of `radius`
+    Shaft,    // capsule: a cylinder of `radius` from the tip to `length` along +z, rounded ends
+    Tube,     // aspiration tube: wall between `inner_radius` and `outer_radius` from the opening
+              // to `length` along +z; `suction` acts on the tissue surface inside the lumen
+    Grasper   // when `closed`, holds the surface nodes within `radius` of the tip where they are
+  };
+  struct Keyframe {  // a pose at time t (s); poses between keyframes are interpolated
+    double t = 0;
+    Eigen::Vector3d position = Eigen::Vector3d::Zero();             // m
+    Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();
+    std::optional<bool> closed;  // grasper: closes or opens at this keyframe
+  };
+  std::string name;
+  Type type = Type::Probe;
+  bool enabled = true;          // false: out of the scene (touches and holds nothing)
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();             // m, tip
+  Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();
+  double radius = 0.003;        // m: probe sphere, shaft, grasper hold radius
+  double length = 0.05;         // m: shaft and tube
+  double inner_radius = 0.005;  // m: tube lumen
+  double outer_radius = 0.0065; // m: tube wall outside
+  double suction = 0.0;         // Pa, tube: pressure below ambient in the lumen (>= 0)
+  bool closed = false;          // grasper
+  std::vector<Keyframe> trajectory;  // empty: the pose stays where it is set
+};
+
+// The contact solver (projected Gauss-Seidel on the Delassus operator, contact.h).
+struct ContactOptions {
+  double friction = 0.0;            // -, Coulomb coefficient between instruments and tissue (>= 0)
+  double alarm_distance = 0.5e-3;   // m: surface nodes nearer than this to an instrument enter the contact problem
+  double tolerance = 1e-7;          // m: largest penetration or stick slip accepted at convergence
+  int max_iterations = 1000;        // Gauss-Seidel sweeps per contact solve
+};
+
 // Empty string when valid, else a message naming the field at fault.
 std::string validate(const ParenchymaOptions& o);
 std::string validate(const CapsuleOptions& o);
 std::string validate(const SolverOptions& o);
 std::string validate(const Region& r);
 std::string validate(const VesselOptions& o);  // field names prefixed with "vessels.<name>."
+std::string validate(const InstrumentOptions& o);  // field names prefixed with "instruments.<name>."
+std::string validate(const ContactOptions& o);
 
 }  // namespace liver_sim

@@ -1,4 +1,5 @@
-// Scene files (YAML): mesh, materials, boundary conditions, loads, solver, probes.
+// Scene files (YAML): mesh, materials, boundary conditions, loads, solver, probes, vessels,
+// instruments and contact.
 // The format is documented in README.md ("Scene format").
 #pragma once
 
@@ -32,6 +33,8 @@ struct Scene {
   SolverOptions solver;
   std::vector<ProbeOptions> probes;
   std::vector<VesselOptions> vessels;  // files resolved like the mesh file
+  std::vector<InstrumentOptions> instruments;
+  ContactOptions contact;
 };
 
 // Parses a scene file. `overrides` are "dotted.key=value" strings applied to the YAML tree

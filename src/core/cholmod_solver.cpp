@@ -62,17 +62,26 @@ bool CholmodSolver::factorize(const std::vector<double>& values) {
 }
 
 void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) {
+  solve_columns(b.data(), 1);
+  x = Eigen::Map<const Eigen::VectorXd>(static_cast<double*>(x_->x), b.size());
+}
+
+void CholmodSolver::solve(const Eigen::MatrixXd& B, Eigen::MatrixXd& X) {
+  solve_columns(B.data(), B.cols());
+  X = Eigen::Map<const Eigen::MatrixXd>(static_cast<double*>(x_->x), B.rows(), B.cols());
+}
+
+void CholmodSolver::solve_columns(const double* b, long columns) {
   if (!factorized_) throw std::logic_error("CholmodSolver::solve without a valid factor");
   cholmod_dense B{};
   B.nrow = factor_->n;
-  B.ncol = 1;
-  B.nzmax = B.nrow;
+  B.ncol = columns;
+  B.nzmax = B.nrow * columns;
   B.d = B.nrow;
-  B.x = const_cast<double*>(b.data());
+  B.x = const_cast<double*>(b);
   B.xtype = CHOLMOD_REAL;
   B.dtype = CHOLMOD_DOUBLE;
   cholmod_solve2(CHOLMOD_A, factor_, &B, nullptr, &x_, nullptr, &Y_, &E_, &common_);
-  x = Eigen::Map<const Eigen::VectorXd>(static_cast<double*>(x_->x), b.size());
 }
 
 double CholmodSolver::factor_nonzeros() const { return common_.lnz; }

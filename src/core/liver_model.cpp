@@ -1,5 +1,7 @@
 #include "liver_sim/liver_model.h"
 
+#include "liver_sim/contact_solver.h"
+
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <algorithm>
@@ -14,7 +16,8 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 constexpr int kMaxKrylov = 30;      // GMRES iterations per Newton step
-constexpr int kRefactorAfter = 10;  // GMRES iterations beyond which the factor is refreshed
+constexpr int kRefactorAfter = 10;
+constexpr int kMaxStages = 16;      // instrument stages per step  // GMRES iterations beyond which the factor is refreshed
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
@@ -32,6 +35,7 @@ const Scene& validated(const Scene& scene) {
   require_valid(validate(scene.parenchyma));
   require_valid(validate(scene.capsule));
   require_valid(validate(scene.solver));
+  require_valid(validate(scene.contact));
   return scene;
 }
 
@@ -62,7 +66,8 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
       parenchyma_(scene.parenchyma),
       capsule_(scene.capsule),
       tetra_(mesh_.V, mesh_.T, parenchyma_),
-      membrane_(mesh_.V, boundary_, capsule_) {
+      membrane_(mesh_.V, boundary_, capsule_),
+      contact_(scene.contact) {
   const int n = static_cast<int>(mesh_.V.rows());
   const std::vector<std::vector<int>> beam_groups = embed_vessels(scene.vessels);
   const int dofs = 3 * n;
@@ -90,9 +95,9 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
 
   X_ = flatten(mesh_.V);
   x_ = X_;
-  target_ = X_;
   v_ = Eigen::VectorXd::Zero(dofs);
   x_start_ = X_;
+  x_stage_ = X_;
   mass_ = Eigen::VectorXd::Zero(dofs);
   for (int e = 0; e < mesh_.T.rows(); ++e)
     for (int k = 0; k < 4; ++k)
@@ -117,7 +122,6 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
   set_fixed(fixed_nodes);
   for (int i = 0; i < n; ++i)
     if (on_boundary_[i]) boundary_nodes_.push_back(i);
-  released_.assign(n, 0);
 
   for (size_t i = 0; i < scene.loads.size(); ++i) {
     const LoadOptions& load = scene.loads[i];
@@ -158,7 +162,11 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
     probes_.push_back({p.name, at});
   }
 
-  for (Eigen::VectorXd* v : {&r_, &r_try_, &dx_, &x_try_, &f_tmp_, &v_tmp_, &f_ext_, &energy_work_}) v->setZero(dofs);
+  for (Eigen::VectorXd* v : {&r_, &r_try_, &dx_, &x_try_, &f_tmp_, &v_tmp_, &f_ext_, &energy_work_,
+                             &contact_force_, &contact_force_start_})
+    v->setZero(dofs);
+  compliance_slot_.assign(n, -1);
+  for (const InstrumentOptions& o : scene.instruments) add_instrument(o);
 }
 
 LiverModel::EmbeddedPoint LiverModel::locate(const Eigen::Vector3d& p) const {
@@ -323,11 +331,15 @@ void LiverModel::reset() {
   factor_valid_ = false;
   state_energy_ = std::numeric_limits<double>::quiet_NaN();
   x_ = X_;
-  target_ = X_;
-  contact_nodes_.clear();
-  set_fixed(scene_fixed_nodes_);
-  probe_reaction_ = ProbeReaction{};
-  std::fill(released_.begin(), released_.end(), 0);
+  contacts_.clear();
+  contact_force_.setZero();
+  for (Instrument& in : instruments_) {
+    in.closed = false;
+    in.was_enabled = false;
+    in.held.clear();
+    in.held_local.clear();
+    in.reaction = InstrumentReaction{};
+  }
   v_.setZero();
   x_start_ = X_;
   time_ = 0;
@@ -412,23 +424,14 @@ double LiverModel::mechanical_energy(const Eigen::VectorXd& x, const Eigen::Vect
 }
 
 double LiverModel::work_over_step() {
-  // Loads: trapezoid rule between the start and the end of the step. Constraints (a probe; the
-  // scene's fixed nodes do not move): their force at the end, -r at the constrained DOFs, times
-  // the displacement.
+  // Loads: trapezoid rule between the start and the end of the step. Instruments: their force
+  // at the end of the step times the displacement (they move only the nodes they touch).
   external_forces(x_start_, f_ext_);
   external_forces(x_, energy_work_);
-  f_ext_ = 0.5 * load_scale_ * (f_ext_ + energy_work_);
-  if (!contact_nodes_.empty()) {
-    double unused;
-    residual(x_, r_try_, &unused, /*zero_fixed=*/false);
-  }
+  f_ext_ = 0.5 * load_scale_ * (f_ext_ + energy_work_) + contact_force_;
   double work = 0;
-  for (int i = 0; i < x_.size(); ++i) {
-    if (!fixed_dof_[i])
-      work += (x_[i] - x_start_[i]) * f_ext_[i];
-    else if (!contact_nodes_.empty())
-      work -= (x_[i] - x_start_[i]) * r_try_[i];
-  }
+  for (int i = 0; i < x_.size(); ++i)
+    if (!fixed_dof_[i]) work += (x_[i] - x_start_[i]) * f_ext_[i];
   return work;
 }
 
@@ -460,6 +463,7 @@ double LiverModel::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double
   // All DOFs: under prescribed displacements alone the reactions are the force scale.
   const double internal_norm = f_tmp_.norm();
   r -= f_tmp_;
+  if (!contacts_.empty()) r += contact_force_;
   if (solver_.mode == SolverOptions::Mode::Dynamic) {
     const double dt = solver_.dt;
     // Backward Euler: M (v - v_n)/dt + D v = f_ext - f_int, v = (x - x_n)/dt, D = a M + b K.
@@ -515,14 +519,31 @@ StepResult LiverModel::step() {
   const auto t_step = Clock::now();
   StepResult result;
   x_start_ = x_;  // the last good state, restored if the step diverges
+  contact_force_start_ = contact_force_;
   const bool dynamic = solver_.mode == SolverOptions::Mode::Dynamic;
-  // Sphere probe: constrain the penetrating nodes, solve, release the nodes the probe would have
-  // to pull, solve again (a few active-set passes; the next step continues from there).
-  for (int pass = 0;; ++pass) {
-    if (probe_) update_contacts();
+  // An instrument that moves more than a quarter of its size in one step (or appears: it comes
+  // in along its axis from where it touches no node) is moved there in stages, each solved, so
+  // that no node is caught deep inside it and pushed out through its far side.
+  const int stages = move_instruments(time_ + solver_.dt);
+  std::vector<Eigen::Isometry3d>& from = stage_from_;
+  std::vector<Eigen::Isometry3d>& to = stage_to_;
+  from.clear();
+  to.clear();
+  for (const Instrument& in : instruments_) {
+    from.push_back(in.pose_start);
+    to.push_back(in.pose);
+  }
+  for (int k = 1; k <= stages && result.status != StepResult::Status::Diverged; ++k) {
+    for (int i = 0; i < num_instruments(); ++i) {
+      Instrument& in = instruments_[i];
+      in.pose_start = in.pose;
+      if (k == 1) in.pose_start = from[i];
+      const double s = static_cast<double>(k) / stages;
+      in.pose = make_pose((1 - s) * from[i].translation() + s * to[i].translation(),
+                          Eigen::Quaterniond(from[i].linear()).slerp(s, Eigen::Quaterniond(to[i].linear())));
+    }
+    x_stage_ = x_;
     newton(result);
-    if (result.status == StepResult::Status::Diverged || !probe_ || !release_tensile_contacts() || pass == 3)
-      break;
   }
   if (dynamic && result.status != StepResult::Status::Diverged && result.iterations > 0) {
     // Backward Euler dissipates: the energy cannot exceed what it had plus the work done on it.
@@ -546,25 +567,22 @@ StepResult LiverModel::step() {
   }
   if (result.status == StepResult::Status::Diverged) {
     x_ = x_start_;
-    contact_nodes_.clear();  // re-established from the restored state at the next step
-    set_fixed(scene_fixed_nodes_);
-  }
-  update_probe_reaction();  // before the velocity update: the residual needs v_n
-  if (result.status != StepResult::Status::Diverged && dynamic) {
-    v_ = (x_ - x_start_) / solver_.dt;
+    contact_force_ = contact_force_start_;
+    detect_contacts(x_);  // the contacts of the restored state (their forces are kept)
+  } else {
+    if (dynamic) v_ = (x_ - x_start_) / solver_.dt;
     time_ += solver_.dt;
   }
+  update_reactions();
+  for (const Contact& c : contacts_) result.contacts += !c.force.isZero(0.0);
   result.timing.total_ms = ms_since(t_step);
   return result;
 }
 
 double LiverModel::merit(double residual_norm, const Eigen::VectorXd& x) const {
-  // A gap in a prescribed position counts as the force that a stiffness E L would need to close it.
-  const double k = parenchyma_.young_modulus * length_scale_;
-  double gap2 = 0;
-  for (int i = 0; i < x.size(); ++i)
-    if (fixed_dof_[i]) gap2 += (target_[i] - x[i]) * (target_[i] - x[i]);
-  return std::sqrt(residual_norm * residual_norm + k * k * gap2);
+  // A contact violation counts as the force that a stiffness E L would need to close it.
+  const double k = parenchyma_.young_modulus * length_scale_ * contact_violation(x);
+  return std::sqrt(residual_norm * residual_norm + k * k);
 }
 
 void LiverModel::newton(StepResult& result) {
@@ -575,6 +593,7 @@ void LiverModel::newton(StepResult& result) {
   const int iterations_before = result.iterations;
   auto t0 = Clock::now();
   double reference = 0;
+  detect_contacts(x_);
   double norm = residual(x_, r_, &reference);
   const double start_merit = merit(norm, x_);
   result.timing.assembly_ms += ms_since(t0);
@@ -594,12 +613,10 @@ void LiverModel::newton(StepResult& result) {
       break;
     }
     result.residual = norm / reference;
-    // Prescribed positions not reached yet (a probe just moved) are part of the next update.
-    double gap = 0;
-    for (int i = 0; i < r_.size(); ++i)
-      if (fixed_dof_[i]) gap = std::max(gap, std::abs(target_[i] - x_[i]));
     // Relative to the forces at play; the absolute floor is round-off, for states near rest.
-    if (norm <= std::max(solver_.tolerance * reference, force_floor_) && gap <= 1e-12 * length_scale_) {
+    // With instruments, the contact conditions must hold too.
+    if (norm <= std::max(solver_.tolerance * reference, force_floor_) &&
+        (contacts_.empty() || contact_violation(x_) <= contact_.tolerance)) {
       result.status = StepResult::Status::Converged;
       break;
     }
@@ -648,10 +665,6 @@ void LiverModel::newton(StepResult& result) {
     t0 = Clock::now();
     // A factorisation costs far more than a GMRES iteration: solve each linearisation well.
     const double forcing = std::clamp(0.1 * solver_.tolerance * reference / current_merit, 1e-6, 0.1);
-    // Constrained rows are identity with the remaining gap on the right-hand side, so that the
-    // free nodes follow the prescribed ones in the same linear solve (consistent lifting).
-    for (int i = 0; i < r_.size(); ++i)
-      if (fixed_dof_[i]) r_[i] = target_[i] - x_[i];
     const Gmres::Operator jacobian = [&](const Eigen::VectorXd& v, Eigen::VectorXd& out) {
       const double h = 1e-8 * length_scale_ / std::max(v.cwiseAbs().maxCoeff(), 1e-300);
       x_try_ = x_ + h * v;
@@ -662,7 +675,14 @@ void LiverModel::newton(StepResult& result) {
     const Gmres::Operator preconditioner = [&](const Eigen::VectorXd& in, Eigen::VectorXd& out) {
       solver_cholmod_.solve(in, out);
     };
-    const int krylov = gmres_.solve(jacobian, preconditioner, r_, dx_, forcing, kMaxKrylov);
+    int krylov;
+    if (contacts_.empty()) {
+      krylov = gmres_.solve(jacobian, preconditioner, r_, dx_, forcing, kMaxKrylov);
+    } else {
+      const auto t_contact = Clock::now();
+      krylov = contact_update(jacobian, forcing, result);
+      result.timing.contact_ms += ms_since(t_contact);
+    }
     result.linear_iterations += krylov;
     result.timing.solve_ms += ms_since(t0);
     if (krylov > kRefactorAfter || gmres_.relative_residual() > forcing) factor_valid_ = false;
@@ -707,86 +727,308 @@ void LiverModel::newton(StepResult& result) {
     r_.swap(r_try_);
     norm = best_norm;
     reference = ref_try;
+    if (detect_contacts(x_)) norm = residual(x_, r_, &reference);
   }
 }
 
-void LiverModel::set_sphere_probe(const Eigen::Vector3d& centre, double radius) {
-  if (!centre.allFinite() || !std::isfinite(radius) || radius <= 0)
-    throw std::invalid_argument("sphere probe: centre must be finite and radius > 0");
-  if (probe_ && probe_->centre == centre && probe_->radius == radius) return;
-  probe_ = SphereProbe{centre, radius};
-  // Released nodes stay free until the probe moves: without it a node that the probe would have
-  // to pull can cycle between contact and release from one step to the next.
-  std::fill(released_.begin(), released_.end(), 0);
-}
-
-void LiverModel::remove_sphere_probe() {
-  probe_.reset();
-  contact_nodes_.clear();
-  set_fixed(scene_fixed_nodes_);
-  update_probe_reaction();
-}
-
-void LiverModel::update_contacts() {
-  // Outward vertex normals of the current surface (area-weighted).
-  node_normal_.setZero(x_.size());
-  for (int f = 0; f < boundary_.rows(); ++f) {
-    const int a = boundary_(f, 0), b = boundary_(f, 1), c = boundary_(f, 2);
-    const Eigen::Vector3d area = (x_.segment<3>(3 * b) - x_.segment<3>(3 * a)).cross(x_.segment<3>(3 * c) - x_.segment<3>(3 * a));
-    for (int k : {a, b, c}) node_normal_.segment<3>(3 * k) += area;
+int LiverModel::add_instrument(const InstrumentOptions& o) {
+  require_valid(validate(o));
+  if (find_instrument(o.name) >= 0) throw std::invalid_argument("instruments." + o.name + ": the name is taken");
+  Instrument in;
+  in.options = o;
+  in.pose = in.pose_start = pose_at(o, time_);
+  if (o.type == InstrumentOptions::Type::Tube) {
+    in.suction_load = static_cast<int>(pressures_.size());
+    pressures_.push_back({0.0, {}});
   }
-  contact_nodes_.clear();
-  const double r = probe_->radius;
-  for (int i : boundary_nodes_) {
-    if (released_[i] || fixed_by_scene_[i]) continue;  // the scene holds those already
-    const Eigen::Vector3d x = x_.segment<3>(3 * i);
-    const Eigen::Vector3d d = x - probe_->centre;
-    const double dist = d.norm();
-    if (dist >= r * (1 + 1e-9)) continue;
-    if (dist > r * (1 - 1e-9)) {
-      target_.segment<3>(3 * i) = x;  // on the surface since the last step: it sticks
-    } else {
-      // Inside: push the node into the tissue (against its outward normal) to where that line
-      // leaves the sphere, as the probe would have carried it on its way in. A radial projection
-      // would pull nodes above the centre of a deep probe out of the tissue.
-      const Eigen::Vector3d n = node_normal_.segment<3>(3 * i).normalized();
-      const double b = n.dot(d);  // |d - t n| = r
-      const double t = b + std::sqrt(b * b + r * r - dist * dist);
-      target_.segment<3>(3 * i) = x - t * n;
+  instruments_.push_back(std::move(in));
+  return num_instruments() - 1;
+}
+
+void LiverModel::update_instrument(int i, const InstrumentOptions& o) {
+  require_valid(validate(o));
+  if (o.type != instruments_[i].options.type || o.name != instruments_[i].options.name)
+    throw std::invalid_argument("instruments." + instruments_[i].options.name + ": name and type cannot change");
+  instruments_[i].options = o;
+}
+
+int LiverModel::find_instrument(const std::string& name) const {
+  for (int i = 0; i < num_instruments(); ++i)
+    if (instruments_[i].options.name == name) return i;
+  return -1;
+}
+
+int LiverModel::move_instruments(double t) {
+  int stages = 1;
+  for (Instrument& in : instruments_) {
+    const InstrumentOptions& o = in.options;
+    in.pose_start = in.pose;
+    in.pose = pose_at(o, t);
+    if (o.enabled && o.type != InstrumentOptions::Type::Grasper) {
+      const double size = o.type == InstrumentOptions::Type::Tube ? o.outer_radius - o.inner_radius : o.radius;
+      if (!in.was_enabled) {
+        // It appears: it comes in along its axis from where it touches no node.
+        double depth = 0;
+        for (int node : boundary_nodes_)
+          depth = std::max(depth, -surface_distance(o, in.pose, x_.segment<3>(3 * node)).distance);
+        in.pose_start = in.pose;
+        in.pose_start.translation() += depth * in.pose.linear().col(2);
+      }
+      const double travel = (in.pose.translation() - in.pose_start.translation()).norm();
+      stages = std::max(stages, std::min(kMaxStages, static_cast<int>(std::ceil(travel / (0.25 * size)))));
     }
-    contact_nodes_.push_back(i);
+    in.was_enabled = o.enabled;
+    if (o.type == InstrumentOptions::Type::Grasper) {
+      const bool closed = o.enabled && closed_at(o, t);
+      if (closed && !in.closed) {
+        // The jaws close on the surface nodes within reach, where they are at this instant.
+        for (int node : boundary_nodes_) {
+          const Eigen::Vector3d x = x_.segment<3>(3 * node);
+          if (fixed_by_scene_[node] || (x - in.pose_start.translation()).norm() > o.radius) continue;
+          in.held.push_back(node);
+          in.held_local.push_back(in.pose_start.inverse() * x);
+        }
+      } else if (!closed) {
+        in.held.clear();
+        in.held_local.clear();
+      }
+      in.closed = closed;
+    }
+    if (in.suction_load >= 0) {
+      // Suction acts on the surface inside the lumen as the step starts.
+      PressureLoad& load = pressures_[in.suction_load];
+      load.pressure = -o.suction;
+      load.triangles.clear();
+      if (!o.enabled || o.suction == 0) continue;
+      for (int f = 0; f < boundary_.rows(); ++f) {
+        const Eigen::Vector3d a = x_.segment<3>(3 * boundary_(f, 0)), b = x_.segment<3>(3 * boundary_(f, 1)),
+                              c = x_.segment<3>(3 * boundary_(f, 2));
+        if (in_tube_lumen(o, in.pose, (a + b + c) / 3, (b - a).cross(c - a))) load.triangles.push_back(f);
+      }
+    }
   }
-  constrained_nodes_.assign(scene_fixed_nodes_.begin(), scene_fixed_nodes_.end());
-  constrained_nodes_.insert(constrained_nodes_.end(), contact_nodes_.begin(), contact_nodes_.end());
-  set_fixed(constrained_nodes_);
+  return stages;
 }
 
-bool LiverModel::release_tensile_contacts() {
+bool LiverModel::detect_contacts(const Eigen::VectorXd& x) {
+  // Contacts are listed by instrument, then node: the previous forces are matched in one pass.
+  contacts_next_.clear();
+  for (int k = 0; k < num_instruments(); ++k) {
+    const Instrument& in = instruments_[k];
+    if (!in.options.enabled) continue;
+    if (in.options.type == InstrumentOptions::Type::Grasper) {
+      for (int node : in.held)
+        contacts_next_.push_back({k, node, true, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()});
+      continue;
+    }
+    for (int node : boundary_nodes_) {
+      if (fixed_by_scene_[node]) continue;  // the scene holds those already
+      if (surface_distance(in.options, in.pose, x.segment<3>(3 * node)).distance >= contact_.alarm_distance) continue;
+      contacts_next_.push_back({k, node, false, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()});
+    }
+  }
+  bool dropped_force = false;
+  size_t j = 0;
+  for (Contact& c : contacts_next_) {
+    while (j < contacts_.size() && std::make_pair(contacts_[j].instrument, contacts_[j].node) < std::make_pair(c.instrument, c.node)) {
+      dropped_force |= !contacts_[j].force.isZero(0.0);
+      ++j;
+    }
+    if (j < contacts_.size() && contacts_[j].instrument == c.instrument && contacts_[j].node == c.node) c.force = contacts_[j++].force;
+  }
+  for (; j < contacts_.size(); ++j) dropped_force |= !contacts_[j].force.isZero(0.0);
+  contacts_.swap(contacts_next_);
+  for (size_t c = 0; c < contacts_.size(); ++c) contacts_[c].rows = contact_rows(static_cast<int>(c), x, &contacts_[c].frame);
+  if (dropped_force) {
+    contact_force_.setZero();
+    for (const Contact& c : contacts_) contact_force_.segment<3>(3 * c.node) += c.force;
+  }
+  return dropped_force;
+}
+
+Eigen::Vector3d LiverModel::contact_rows(int c, const Eigen::VectorXd& x, Eigen::Matrix3d* frame) const {
+  const Contact& contact = contacts_[c];
+  const Instrument& in = instruments_[contact.instrument];
+  const Eigen::Vector3d p = x.segment<3>(3 * contact.node);
+  if (contact.bilateral) {
+    const auto it = std::find(in.held.begin(), in.held.end(), contact.node);
+    frame->setIdentity();
+    return p - in.pose * in.held_local[it - in.held.begin()];
+  }
+  const SurfaceDistance d = surface_distance(in.options, in.pose, p);
+  // Tangents: any orthonormal pair (forces are carried between iterations in the world frame).
+  const Eigen::Vector3d helper = std::abs(d.normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d t1 = d.normal.cross(helper).normalized();
+  frame->col(0) = d.normal;
+  frame->col(1) = t1;
+  frame->col(2) = d.normal.cross(t1);
+  // Slip over the step: against the instrument point that was under the node at its start.
+  const Eigen::Vector3d p0 = x_stage_.segment<3>(3 * contact.node);
+  const Eigen::Vector3d slip = p - in.pose * (in.pose_start.inverse() * p0);
+  return Eigen::Vector3d(d.distance, frame->col(1).dot(slip), frame->col(2).dot(slip));
+}
+
+double LiverModel::contact_violation(const Eigen::VectorXd& x) const {
+  double worst = 0;
+  Eigen::Matrix3d frame;
+  for (size_t c = 0; c < contacts_.size(); ++c) {
+    const Contact& contact = contacts_[c];
+    const Eigen::Vector3d rows = contact_rows(static_cast<int>(c), x, &frame);
+    if (contact.bilateral) {
+      worst = std::max(worst, rows.cwiseAbs().maxCoeff());
+      continue;
+    }
+    const Eigen::Vector3d lambda = frame.transpose() * contact.force;
+    worst = std::max(worst, lambda[0] > 0 ? std::abs(rows[0]) : -rows[0]);  // Signorini
+    const double cone = contact_.friction * lambda[0];
+    if (lambda[0] > 0 && lambda.tail<2>().norm() < cone * (1 - 1e-6))  // strictly inside: sticks
+      worst = std::max(worst, rows.tail<2>().norm());
+  }
+  return worst;
+}
+
+int LiverModel::contact_update(const std::function<void(const Eigen::VectorXd&, Eigen::VectorXd&)>& jacobian,
+                               double forcing, StepResult& result) {
+  // 1. Compliance columns of the factor now in use: the nodes that lack them, in one solve.
+  if (compliance_factor_ != solver_cholmod_.factorizations()) {
+    for (int node : compliance_nodes_) compliance_slot_[node] = -1;
+    compliance_nodes_.clear();
+    compliance_factor_ = solver_cholmod_.factorizations();
+  }
+  std::vector<int>& missing = missing_nodes_;
+  missing.clear();
+  for (const Contact& c : contacts_)
+    if (compliance_slot_[c.node] < 0 && std::find(missing.begin(), missing.end(), c.node) == missing.end())
+      missing.push_back(c.node);
+  const Eigen::Index dofs = x_.size();
+  if (!missing.empty()) {
+    rhs_columns_.setZero(dofs, 3 * static_cast<Eigen::Index>(missing.size()));
+    for (size_t k = 0; k < missing.size(); ++k)
+      for (int d = 0; d < 3; ++d) rhs_columns_(3 * missing[k] + d, 3 * k + d) = 1.0;
+    solver_cholmod_.solve(rhs_columns_, new_columns_);
+    const Eigen::Index used = static_cast<Eigen::Index>(compliance_nodes_.size());
+    const Eigen::Index needed = 3 * (used + static_cast<Eigen::Index>(missing.size()));
+    if (compliance_.cols() < needed) compliance_.conservativeResize(dofs, std::max<Eigen::Index>(needed, 2 * compliance_.cols()));
+    compliance_.middleCols(3 * used, new_columns_.cols()) = new_columns_;
+    for (int node : missing) {
+      compliance_slot_[node] = static_cast<int>(compliance_nodes_.size());
+      compliance_nodes_.push_back(node);
+    }
+    compliance_columns_ += new_columns_.cols();
+  }
+  auto columns = [&](int node) {
+    return Eigen::Map<const Eigen::MatrixXd>(compliance_.data() + 3 * compliance_slot_[node] * dofs, dofs, 3);
+  };
+
+  // 2. The frictional contact problem on the Delassus operator W = H A^-1 H^T, with the rows
+  // predicted after the tangent's update A^-1 r: which contacts separate, stick or slide.
+  solver_cholmod_.solve(r_, dx_);
+  const int m = static_cast<int>(contacts_.size());
+  delassus_.resize(3 * m, 3 * m);
+  contact_delta_.resize(3 * m);
+  contact_lambda_.resize(3 * m);
+  contact_bilateral_.resize(m);
+  for (int d = 0; d < m; ++d) {
+    const auto G = columns(contacts_[d].node);
+    for (int c = 0; c < m; ++c)
+      delassus_.block<3, 3>(3 * c, 3 * d) =
+          contacts_[c].frame.transpose() * G.middleRows<3>(3 * contacts_[c].node) * contacts_[d].frame;
+  }
+  for (int c = 0; c < m; ++c) {
+    const Contact& contact = contacts_[c];
+    contact_delta_.segment<3>(3 * c) = contact.rows + contact.frame.transpose() * dx_.segment<3>(3 * contact.node);
+    contact_lambda_.segment<3>(3 * c) = contact.frame.transpose() * contact.force;
+    contact_bilateral_[c] = contact.bilateral;
+  }
+  const ContactSolveResult solved = solve_frictional_contacts(delassus_, contact_delta_, contact_bilateral_, contact_.friction,
+                                                              0.01 * contact_.tolerance, contact_.max_iterations, contact_lambda_);
+  ++contact_solves_;
+  result.contact_sweeps += solved.sweeps;
+
+  // 3. The Newton update for that contact state, on the true Jacobian J:
+  //      J dx - B lambda = r_free,   H dx = -rows
+  // (sticking and held contacts: three rows and forces along the frame; sliding: the normal
+  // row, and a force along n + mu t on the cone's edge; separating: none). GMRES, preconditioned
+  // by the same system with the tangent A, which the compliance columns solve exactly:
+  // lambda = S^-1 (g - H A^-1 u), dx = A^-1 (u + B lambda), S = H A^-1 B.
+  unknown_rows_.clear();
+  for (int c = 0; c < m; ++c) {
+    const Contact& contact = contacts_[c];
+    const Eigen::Vector3d lambda = contact_lambda_.segment<3>(3 * c);
+    const double cone = contact_.friction * lambda[0];
+    if (contact.bilateral || (lambda[0] > 0 && contact_.friction > 0 && lambda.tail<2>().norm() < cone * (1 - 1e-9))) {
+      for (int k = 0; k < 3; ++k) unknown_rows_.push_back({c, contact.frame.col(k), contact.frame.col(k), -contact.rows[k]});
+    } else if (lambda[0] > 0) {
+      Eigen::Vector3d direction = contact.frame.col(0);
+      if (contact_.friction > 0) direction += contact.frame.rightCols<2>() * (lambda.tail<2>() / lambda[0]);
+      unknown_rows_.push_back({c, contact.frame.col(0), direction, -contact.rows[0]});
+    }
+  }
+  const int k = static_cast<int>(unknown_rows_.size());
+  schur_.resize(k, k);
+  for (int b = 0; b < k; ++b) {
+    const auto G = columns(contacts_[unknown_rows_[b].contact].node);
+    for (int a = 0; a < k; ++a)
+      schur_(a, b) = unknown_rows_[a].row.dot(G.middleRows<3>(3 * contacts_[unknown_rows_[a].contact].node) * unknown_rows_[b].force);
+  }
+  schur_lu_.compute(schur_);
+  augmented_rhs_.resize(dofs + k);
+  augmented_rhs_.head(dofs) = r_ - contact_force_;
+  for (int a = 0; a < k; ++a) augmented_rhs_[dofs + a] = unknown_rows_[a].target;
+  const Gmres::Operator system = [&](const Eigen::VectorXd& z, Eigen::VectorXd& out) {
+    augmented_dx_ = z.head(dofs);
+    jacobian(augmented_dx_, augmented_out_);
+    out.resize(dofs + k);
+    out.head(dofs) = augmented_out_;
+    for (int a = 0; a < k; ++a) {
+      const int node = contacts_[unknown_rows_[a].contact].node;
+      out.segment<3>(3 * node) -= unknown_rows_[a].force * z[dofs + a];
+      out[dofs + a] = unknown_rows_[a].row.dot(z.segment<3>(3 * node));
+    }
+  };
+  const Gmres::Operator preconditioner = [&](const Eigen::VectorXd& in, Eigen::VectorXd& out) {
+    augmented_dx_ = in.head(dofs);
+    solver_cholmod_.solve(augmented_dx_, augmented_out_);
+    schur_rhs_.resize(k);
+    for (int a = 0; a < k; ++a)
+      schur_rhs_[a] = in[dofs + a] - unknown_rows_[a].row.dot(augmented_out_.segment<3>(3 * contacts_[unknown_rows_[a].contact].node));
+    const Eigen::VectorXd lambda = schur_lu_.solve(schur_rhs_);
+    out.resize(dofs + k);
+    for (int a = 0; a < k; ++a)
+      augmented_out_ += columns(contacts_[unknown_rows_[a].contact].node) * (unknown_rows_[a].force * lambda[a]);
+    out.head(dofs) = augmented_out_;
+    out.tail(k) = lambda;
+  };
+  const int krylov = gmres_.solve(system, preconditioner, augmented_rhs_, augmented_solution_, forcing, kMaxKrylov);
+  dx_ = augmented_solution_.head(dofs);
+  contact_force_.setZero();
+  for (Contact& c : contacts_) c.force.setZero();
+  for (int a = 0; a < k; ++a) {
+    Contact& c = contacts_[unknown_rows_[a].contact];
+    c.force += unknown_rows_[a].force * augmented_solution_[dofs + a];
+    contact_force_.segment<3>(3 * c.node) += unknown_rows_[a].force * augmented_solution_[dofs + a];
+  }
+  return krylov;
+}
+
+void LiverModel::update_reactions() {
+  for (Instrument& in : instruments_) in.reaction = InstrumentReaction{};
+  for (const Contact& c : contacts_) {
+    if (c.force.isZero(0.0)) continue;
+    InstrumentReaction& r = instruments_[c.instrument].reaction;
+    r.force -= c.force;
+    r.torque -= (x_.segment<3>(3 * c.node) - instruments_[c.instrument].pose.translation()).cross(c.force);
+    ++r.contacts;
+  }
+}
+
+Eigen::VectorXd LiverModel::support_forces() {
   double unused;
   residual(x_, r_try_, &unused, /*zero_fixed=*/false);
-  bool released = false;
-  for (int i : contact_nodes_) {
-    // r = f_ext - f_int; the probe supplies -r. It can push the node outward, never pull it.
-    const Eigen::Vector3d n = (x_.segment<3>(3 * i) - probe_->centre).normalized();
-    if (r_try_.segment<3>(3 * i).dot(n) > 0) {
-      released_[i] = 1;
-      released = true;
-    }
-  }
-  return released;
-}
-
-void LiverModel::update_probe_reaction() {
-  probe_reaction_ = ProbeReaction{};
-  if (!probe_) return;
-  double unused;
-  residual(x_, r_try_, &unused, /*zero_fixed=*/false);
-  for (int i : contact_nodes_) {
-    const Eigen::Vector3d f = r_try_.segment<3>(3 * i);  // tissue on probe
-    probe_reaction_.force += f;
-    probe_reaction_.torque += (x_.segment<3>(3 * i) - probe_->centre).cross(f);
-  }
-  probe_reaction_.contacts = static_cast<int>(contact_nodes_.size());
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(x_.size());
+  for (int i = 0; i < f.size(); ++i)
+    if (fixed_dof_[i]) f[i] = -r_try_[i];  // the support balances the residual
+  return f;
 }
 
 }  // namespace liver_sim

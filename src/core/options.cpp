@@ -65,6 +65,47 @@ std::string validate(const VesselOptions& o) {
                       non_negative(k + "snap_tolerance", o.snap_tolerance)});
 }
 
+std::string validate(const InstrumentOptions& o) {
+  const std::string k = "instruments." + o.name + ".";
+  using Type = InstrumentOptions::Type;
+  auto pose_ok = [](const Eigen::Vector3d& p, const Eigen::Quaterniond& q) {
+    return p.allFinite() && q.coeffs().allFinite() && q.norm() > 1e-6;
+  };
+  std::string shape;
+  switch (o.type) {
+    case Type::Probe: shape = positive(k + "radius", o.radius); break;
+    case Type::Grasper: shape = positive(k + "radius", o.radius); break;
+    case Type::Shaft: shape = first_error({positive(k + "radius", o.radius), positive(k + "length", o.length)}); break;
+    case Type::Tube:
+      shape = first_error({positive(k + "inner_radius", o.inner_radius),
+                           o.outer_radius > o.inner_radius && std::isfinite(o.outer_radius)
+                               ? ""
+                               : message(k + "outer_radius", "finite and > inner_radius", o.outer_radius),
+                           positive(k + "length", o.length), non_negative(k + "suction", o.suction)});
+      break;
+  }
+  std::string path;
+  for (size_t i = 0; i < o.trajectory.size() && path.empty(); ++i) {
+    const InstrumentOptions::Keyframe& f = o.trajectory[i];
+    const std::string ki = k + "trajectory." + std::to_string(i);
+    if (!std::isfinite(f.t) || (i > 0 && !(f.t > o.trajectory[i - 1].t)))
+      path = ki + ".t must be finite and increase along the trajectory";
+    else if (!pose_ok(f.position, f.orientation))
+      path = ki + ": position and orientation must be finite, the quaternion non-zero";
+  }
+  return first_error({o.name.empty() ? "instruments: a name is required" : "", shape,
+                      pose_ok(o.position, o.orientation) ? ""
+                                                         : k + "pose: position and orientation must be finite, the quaternion non-zero",
+                      path});
+}
+
+std::string validate(const ContactOptions& o) {
+  return first_error({non_negative("contact.friction", o.friction),
+                      non_negative("contact.alarm_distance", o.alarm_distance),
+                      positive("contact.tolerance", o.tolerance),
+                      o.max_iterations >= 1 ? "" : message("contact.max_iterations", ">= 1", o.max_iterations)});
+}
+
 std::string validate(const Region& r) {
   if (!r.min.allFinite() || !r.max.allFinite() || !r.center.allFinite() || !r.normal.allFinite())
     return "region coordinates must be finite";

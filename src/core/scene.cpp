@@ -124,7 +124,8 @@ class Reader {
 
   Scene scene(const YAML::Node& root, const std::string& base_dir) const {
     if (!root.IsMap()) fail("", "expected a map of sections");
-    check_keys(root, "", {"mesh", "parenchyma", "capsule", "fixed", "loads", "solver", "probes", "vessels"});
+    check_keys(root, "", {"mesh", "parenchyma", "capsule", "fixed", "loads", "solver", "probes", "vessels",
+                          "instruments", "contact"});
     Scene s;
     read_mesh_source(required(root, "", "mesh"), base_dir, s.mesh);
     if (const YAML::Node p = root["parenchyma"]) {
@@ -173,9 +174,22 @@ class Reader {
       std::set<std::string> names;
       for (size_t i = 0; i < v.size(); ++i) s.vessels.push_back(vessel(v[i], "vessels." + std::to_string(i), base_dir, names));
     }
+    if (const YAML::Node in = root["instruments"]) {
+      if (!in.IsSequence()) fail("instruments", "expected a list of instruments");
+      std::set<std::string> names;
+      for (size_t i = 0; i < in.size(); ++i) s.instruments.push_back(instrument(in[i], "instruments." + std::to_string(i), names));
+    }
+    if (const YAML::Node c = root["contact"]) {
+      check_keys(c, "contact", {"friction", "alarm_distance", "tolerance", "max_iterations"});
+      if (c["friction"]) s.contact.friction = number(c["friction"], "contact.friction");
+      if (c["alarm_distance"]) s.contact.alarm_distance = number(c["alarm_distance"], "contact.alarm_distance");
+      if (c["tolerance"]) s.contact.tolerance = number(c["tolerance"], "contact.tolerance");
+      if (c["max_iterations"]) s.contact.max_iterations = integer(c["max_iterations"], "contact.max_iterations");
+    }
     require_valid(validate(s.parenchyma));
     require_valid(validate(s.capsule));
     require_valid(validate(s.solver));
+    require_valid(validate(s.contact));
     return s;
   }
 
@@ -227,6 +241,75 @@ class Reader {
     if (node["young_modulus"]) o.young_modulus = number(node["young_modulus"], key + ".young_modulus");
     if (node["poisson_ratio"]) o.poisson_ratio = number(node["poisson_ratio"], key + ".poisson_ratio");
     if (node["snap_tolerance"]) o.snap_tolerance = number(node["snap_tolerance"], key + ".snap_tolerance");
+    const std::string error = validate(o);
+    if (!error.empty()) fail(key, error);
+    return o;
+  }
+
+  Eigen::Quaterniond quaternion(const YAML::Node& node, const std::string& key) const {
+    if (!node.IsSequence() || node.size() != 4) fail(key, "expected [x, y, z, w]");
+    Eigen::Quaterniond q(number(node[3], key + ".3"), number(node[0], key + ".0"), number(node[1], key + ".1"),
+                         number(node[2], key + ".2"));
+    if (q.norm() < 1e-6) fail(key, "the quaternion must be non-zero");
+    return q.normalized();
+  }
+
+  // {position: [x, y, z], orientation: [x, y, z, w]} (orientation optional: identity).
+  void pose(const YAML::Node& node, const std::string& key, Eigen::Vector3d& p, Eigen::Quaterniond& q) const {
+    check_keys(node, key, {"position", "orientation"});
+    p = vec3(required(node, key, "position"), key + ".position");
+    if (node["orientation"]) q = quaternion(node["orientation"], key + ".orientation");
+  }
+
+  InstrumentOptions instrument(const YAML::Node& node, const std::string& key, std::set<std::string>& names) const {
+    if (!node.IsMap()) fail(key, "expected a map");
+    const std::string type = word(required(node, key, "type"), key + ".type", {"probe", "shaft", "tube", "grasper"});
+    std::set<std::string> allowed = {"name", "type", "enabled", "pose", "trajectory"};
+    using Type = InstrumentOptions::Type;
+    InstrumentOptions o;
+    if (type == "probe") {
+      o.type = Type::Probe;
+      allowed.insert("radius");
+    } else if (type == "shaft") {
+      o.type = Type::Shaft;
+      allowed.insert({"radius", "length"});
+    } else if (type == "tube") {
+      o.type = Type::Tube;
+      allowed.insert({"inner_radius", "outer_radius", "length", "suction"});
+    } else {
+      o.type = Type::Grasper;
+      allowed.insert({"radius", "closed"});
+    }
+    check_keys(node, key, allowed);
+    const YAML::Node name = required(node, key, "name");
+    if (!name.IsScalar() || name.Scalar().empty() || !names.insert(name.Scalar()).second)
+      fail(key + ".name", "instrument names must be non-empty and unique");
+    o.name = name.Scalar();
+    if (node["enabled"]) o.enabled = boolean(node["enabled"], key + ".enabled");
+    if (node["radius"]) o.radius = number(node["radius"], key + ".radius");
+    if (node["length"]) o.length = number(node["length"], key + ".length");
+    if (node["inner_radius"]) o.inner_radius = number(node["inner_radius"], key + ".inner_radius");
+    if (node["outer_radius"]) o.outer_radius = number(node["outer_radius"], key + ".outer_radius");
+    if (node["suction"]) o.suction = number(node["suction"], key + ".suction");
+    if (node["closed"]) o.closed = boolean(node["closed"], key + ".closed");
+    if (node["pose"]) pose(node["pose"], key + ".pose", o.position, o.orientation);
+    if (const YAML::Node path = node["trajectory"]) {
+      if (!path.IsSequence() || path.size() == 0) fail(key + ".trajectory", "expected a list of {t, position, orientation}");
+      for (size_t i = 0; i < path.size(); ++i) {
+        const std::string k = key + ".trajectory." + std::to_string(i);
+        check_keys(path[i], k, {"t", "position", "orientation", "closed"});
+        InstrumentOptions::Keyframe f;
+        f.t = number(required(path[i], k, "t"), k + ".t");
+        f.position = vec3(required(path[i], k, "position"), k + ".position");
+        if (path[i]["orientation"]) f.orientation = quaternion(path[i]["orientation"], k + ".orientation");
+        if (path[i]["closed"]) {
+          if (o.type != Type::Grasper) fail(k + ".closed", "only a grasper opens and closes");
+          f.closed = boolean(path[i]["closed"], k + ".closed");
+        }
+        o.trajectory.push_back(f);
+      }
+    }
+    if (!node["pose"] && !node["trajectory"]) fail(key, "needs a pose or a trajectory");
     const std::string error = validate(o);
     if (!error.empty()) fail(key, error);
     return o;

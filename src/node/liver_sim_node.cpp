@@ -83,6 +83,14 @@ class LiverSimNode {
       throw std::invalid_argument(scene_path + ": " + e.what());
     }
     capsule_ = scene.capsule;
+    // The instrument driven by instrument_pose / instrument_frames: out of the scene until its
+    // first pose.
+    InstrumentOptions probe;
+    probe.name = "ros_probe";
+    probe.type = InstrumentOptions::Type::Probe;
+    probe.radius = probe_radius_;
+    probe.enabled = false;
+    probe_index_ = model_->add_instrument(probe);
     ROS_INFO("liver_sim: %s: %ld nodes, %ld tetrahedra, %d capsule triangles, %d vessel beams, %s mode",
              scene_path.c_str(), static_cast<long>(model_->mesh().V.rows()), static_cast<long>(model_->mesh().T.rows()),
              model_->capsule_triangles(), model_->num_beams(),
@@ -146,7 +154,7 @@ class LiverSimNode {
     bool changed = false;
     if (reset_requested_) {
       model_->reset();
-      model_->remove_sphere_probe();
+      set_probe(std::nullopt);
       probe_centre_.reset();
       pose_changed_ = false;
       reset_requested_ = false;
@@ -162,18 +170,27 @@ class LiverSimNode {
     }
     for (const std::string& frame : instrument_frames_) lookup_instrument_frame(frame);
     if (probe_removed_) {
-      model_->remove_sphere_probe();
+      set_probe(std::nullopt);
       probe_centre_.reset();
       probe_removed_ = false;
       changed = true;
     }
     if (pose_changed_ && probe_centre_) {
-      model_->set_sphere_probe(*probe_centre_, probe_radius_);
+      set_probe(probe_centre_);
       reflected_stamp_ = pose_stamp_;
       pose_changed_ = false;
       changed = true;
     }
     return changed;
+  }
+
+  // The ROS-driven probe at a tip centre, or out of the scene. (mutex held)
+  void set_probe(const std::optional<Eigen::Vector3d>& centre) {
+    InstrumentOptions o = model_->instrument(probe_index_);
+    o.enabled = centre.has_value();
+    if (centre) o.position = *centre;
+    o.radius = probe_radius_;
+    model_->update_instrument(probe_index_, o);  // inputs are validated on arrival
   }
 
   // Instruments tracked through tf: the frame origin is the probe tip centre. (mutex held)
@@ -301,7 +318,7 @@ class LiverSimNode {
     s.iterations = r.iterations;
     s.residual = r.residual;
     s.max_displacement = model_->max_displacement();
-    s.active_contacts = model_->probe_reaction().contacts;
+    s.active_contacts = r.contacts;
     s.state = state_;
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -312,7 +329,7 @@ class LiverSimNode {
 
     geometry_msgs::WrenchStamped w;
     w.header = s.header;
-    const auto& reaction = model_->probe_reaction();
+    const auto& reaction = model_->instrument_reaction(probe_index_);
     w.wrench.force.x = reaction.force.x();
     w.wrench.force.y = reaction.force.y();
     w.wrench.force.z = reaction.force.z();
@@ -365,7 +382,7 @@ class LiverSimNode {
     stat.add("steps", steps_);
     stat.add("last step time (s)", last_.timing.total_ms / 1000.0);
     stat.add("residual", last_.residual);
-    stat.add("active contacts", model_->probe_reaction().contacts);
+    stat.add("active contacts", last_.contacts);
     std::lock_guard<std::mutex> lock(mutex_);
     stat.add("rejected inputs", rejected_);
     stat.add("point clouds received", clouds_);
@@ -376,6 +393,7 @@ class LiverSimNode {
   tf2_ros::TransformListener tf_listener_;
   diagnostic_updater::Updater updater_;
   std::unique_ptr<LiverModel> model_;
+  int probe_index_ = -1;
   std::string frame_id_;
   double rate_, publish_rate_, probe_radius_, color_scale_max_, surface_alpha_;
   std::vector<std::string> instrument_frames_;

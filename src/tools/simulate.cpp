@@ -115,7 +115,7 @@ int run(const Options& opt) {
   StepResult last;
   liver_sim::StepTiming sum;
   int iterations = 0, max_iterations = 0, linear_iterations = 0, factorizations = 0, converged_steps = 0,
-      steps_done = 0;
+      steps_done = 0, contact_sweeps = 0, max_contacts = 0;
   auto last_report = std::chrono::steady_clock::now();
   for (int k = 1; k <= steps; ++k) {
     if (!dynamic) model.set_load_scale(static_cast<double>(k) / steps);
@@ -125,6 +125,9 @@ int run(const Options& opt) {
     sum.assembly_ms += last.timing.assembly_ms;
     sum.factorization_ms += last.timing.factorization_ms;
     sum.solve_ms += last.timing.solve_ms;
+    sum.contact_ms += last.timing.contact_ms;
+    contact_sweeps += last.contact_sweeps;
+    max_contacts = std::max(max_contacts, last.contacts);
     iterations += last.iterations;
     linear_iterations += last.linear_iterations;
     factorizations += last.factorizations;
@@ -174,13 +177,22 @@ int run(const Options& opt) {
      << ", \"max\": " << sorted.back() << "},\n"
      << "  \"phase_time_ms_per_step\": {\"assembly\": " << sum.assembly_ms / steps_done
      << ", \"factorization\": " << sum.factorization_ms / steps_done
-     << ", \"solve\": " << sum.solve_ms / steps_done << "},\n"
+     << ", \"solve\": " << sum.solve_ms / steps_done << ", \"contact\": " << sum.contact_ms / steps_done << "},\n"
+     << "  \"contact\": {\"max_contacts\": " << max_contacts << ", \"gauss_seidel_sweeps\": " << contact_sweeps
+     << ", \"problems_solved\": " << model.contact_solves() << ", \"compliance_columns\": " << model.compliance_columns()
+     << "},\n"
      << "  \"max_displacement\": " << model.max_displacement() << ",\n"
      << "  \"probes\": {";
   for (int p = 0; p < model.num_probes(); ++p)
     js << (p ? ", " : "") << "\n    " << json_string(model.probe_name(p)) << ": {\"displacement\": "
        << json_vec(model.probe_displacement(p)) << "}";
-  js << (model.num_probes() ? "\n  " : "") << "}\n}\n";
+  js << (model.num_probes() ? "\n  " : "") << "},\n  \"instruments\": {";
+  for (int i = 0; i < model.num_instruments(); ++i) {
+    const LiverModel::InstrumentReaction& r = model.instrument_reaction(i);
+    js << (i ? ", " : "") << "\n    " << json_string(model.instrument(i).name) << ": {\"force\": " << json_vec(r.force)
+       << ", \"torque\": " << json_vec(r.torque) << ", \"contacts\": " << r.contacts << "}";
+  }
+  js << (model.num_instruments() ? "\n  " : "") << "}\n}\n";
   std::cout << js.str();
   return last.status == StepResult::Status::Diverged ? 3 : 0;
 }

@@ -1,0 +1,387 @@
+// Instruments in frictional contact: the contact solver alone, no penetration, stick and slip,
+// equilibrium with the supports, Hertz indentation under mesh refinement, graspers, tubes,
+// trajectories, the skipped contact path, and bad input.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "liver_sim/contact_solver.h"
+#include "liver_sim/liver_model.h"
+#include "regions.h"
+
+namespace liver_sim {
+namespace {
+
+constexpr double kTolerance = 1e-7;  // m: ContactOptions::tolerance, the stated penetration bound
+
+Scene block_scene(double E, double nu, double friction) {
+  Scene s;
+  s.parenchyma.young_modulus = E;
+  s.parenchyma.poisson_ratio = nu;
+  s.solver.tolerance = 1e-8;
+  s.solver.max_iterations = 60;
+  s.contact.friction = friction;
+  s.contact.tolerance = kTolerance;
+  s.fixed.push_back(box({-1, -1, -1}, {1, 1, 1e-9}));  // bottom face
+  return s;
+}
+
+InstrumentOptions probe(const std::string& name, const Eigen::Vector3d& centre, double radius) {
+  InstrumentOptions o;
+  o.name = name;
+  o.type = InstrumentOptions::Type::Probe;
+  o.position = centre;
+  o.radius = radius;
+  return o;
+}
+
+Eigen::Vector3d node(const LiverModel& m, int i) { return m.positions().segment<3>(3 * i); }
+
+// Sum over nodes of a per-DOF force vector.
+Eigen::Vector3d total(const Eigen::VectorXd& f) {
+  Eigen::Vector3d s = Eigen::Vector3d::Zero();
+  for (int i = 0; i < f.size(); i += 3) s += f.segment<3>(i);
+  return s;
+}
+
+// One contact with W = w I: the gap closes, the tangential force sticks inside the cone and
+// sits on its edge against the slip outside it; an open gap gives no force.
+TEST(ContactSolver, SingleContactSignoriniAndCoulomb) {
+  const double w = 2e-3, mu = 0.5;
+  const Eigen::MatrixXd W = w * Eigen::MatrixXd::Identity(3, 3);
+  const std::vector<char> unilateral = {0};
+  auto solve = [&](const Eigen::Vector3d& delta0) {
+    Eigen::VectorXd lambda = Eigen::VectorXd::Zero(3);
+    const ContactSolveResult r = solve_frictional_contacts(W, delta0, unilateral, mu, 1e-14, 100, lambda);
+    EXPECT_TRUE(r.converged);
+    return Eigen::Vector3d(lambda);
+  };
+  const Eigen::Vector3d stick = solve({-1e-3, 0.2e-3, 0});  // |s| / w = 0.1 < mu g / w = 0.25
+  EXPECT_NEAR(stick[0], 1e-3 / w, 1e-12);
+  EXPECT_NEAR(stick[1], -0.2e-3 / w, 1e-12);
+  const Eigen::Vector3d slide = solve({-1e-3, 0, -2e-3});
+  EXPECT_NEAR(slide[0], 1e-3 / w, 1e-12);
+  EXPECT_NEAR(slide[2], mu * slide[0], 1e-12) << "on the cone's edge, against the slip";
+  EXPECT_EQ(solve({1e-3, 5e-3, 0}), Eigen::Vector3d::Zero());
+}
+
+// Two coupled contacts, bilateral: the exact solution of W lambda = -delta0.
+TEST(ContactSolver, BilateralContactsSolveTheLinearSystem) {
+  Eigen::MatrixXd W(6, 6);
+  W.setRandom();
+  W = W * W.transpose() + 6 * Eigen::MatrixXd::Identity(6, 6);
+  const Eigen::VectorXd delta0 = Eigen::VectorXd::LinSpaced(6, -1, 1);
+  Eigen::VectorXd lambda = Eigen::VectorXd::Zero(6);
+  ASSERT_TRUE(solve_frictional_contacts(W, delta0, {1, 1}, 0.0, 1e-13, 1000, lambda).converged);
+  EXPECT_LE((W * lambda + delta0).norm(), 1e-10);
+}
+
+// A sphere pressed 2 mm into a block clamped at its base: no node inside it beyond the stated
+// tolerance, the tissue pushes it back, symmetric forces, and the probe's reaction equals the
+// supports' (nothing else loads the block). Withdrawn, the block springs back.
+TEST(Probe, PressedIntoBlockBalancesTheSupports) {
+  const double L = 0.02, r = 0.004;
+  LiverModel m(make_box_mesh({L, L, L}, {8, 8, 8}), block_scene(3000, 0.45, 0.0));
+  InstrumentOptions p = probe("probe", {L / 2, L / 2, L + r - 0.002}, r);
+  const int k = m.add_instrument(p);
+  const StepResult res = m.step();
+  ASSERT_TRUE(res.converged()) << res.message << " residual " << res.residual;
+  const LiverModel::InstrumentReaction reaction = m.instrument_reaction(k);
+  EXPECT_GT(reaction.contacts, 4);
+  EXPECT_GT(reaction.force.z(), 0.0) << "the tissue pushes the probe back";
+  EXPECT_LE(std::hypot(reaction.force.x(), reaction.force.y()), 1e-6 * reaction.force.z());
+  EXPECT_LE(reaction.torque.norm(), 1e-6 * reaction.force.z() * r);
+  for (int i = 0; i < m.mesh().V.rows(); ++i)
+    ASSERT_GE((node(m, i) - p.position).norm(), r - kTolerance) << "node " << i << " inside the probe";
+  const Eigen::Vector3d support = total(m.support_forces());
+  EXPECT_LE((support - reaction.force).norm(), 1e-6 * reaction.force.norm()) << support.transpose();
+
+  p.position.z() -= 0.001;
+  m.update_instrument(k, p);
+  ASSERT_TRUE(m.step().converged());
+  EXPECT_GT(m.instrument_reaction(k).force.z(), reaction.force.z()) << "deeper, harder";
+
+  p.enabled = false;
+  m.update_instrument(k, p);
+  const StepResult back = m.step();
+  ASSERT_TRUE(back.converged()) << back.message;
+  EXPECT_LE(m.displacement().cwiseAbs().maxCoeff(), 1e-9 * L);
+  EXPECT_EQ(m.instrument_reaction(k).contacts, 0);
+}
+
+// Pressed with friction 0.4 and dragged along x along a scene trajectory (static pseudo-time,
+// dt = 1 per step): a short drag sticks (the node under the probe moves with it and the
+// tangential force stays inside the cone); a long one slides (the force sits on the cone, |Ft| =
+// mu Fn, and the node lags behind the probe).
+TEST(Probe, DragSticksBelowCoulombAndSlidesAbove) {
+  const double L = 0.02, r = 0.005, mu = 0.4;
+  Scene s = block_scene(3000, 0.3, mu);
+  s.solver.dt = 1.0;
+  InstrumentOptions p = probe("probe", Eigen::Vector3d::Zero(), r);
+  const Eigen::Vector3d pressed(L / 2, L / 2, L + r - 0.0015);
+  for (const auto& [t, dx] : std::vector<std::pair<double, double>>{{1, 0}, {2, 0.00002}, {3, 0.004}}) {
+    InstrumentOptions::Keyframe f;
+    f.t = t;
+    f.position = pressed + Eigen::Vector3d(dx, 0, 0);
+    p.trajectory.push_back(f);
+  }
+  s.instruments.push_back(p);
+  LiverModel m(make_box_mesh({L, L, L}, {10, 10, 10}), s);
+  int top = -1;  // the node under the probe's centre
+  for (int i = 0; i < m.mesh().V.rows(); ++i)
+    if ((m.mesh().V.row(i).transpose() - Eigen::Vector3d(L / 2, L / 2, L)).norm() < 1e-9) top = i;
+  ASSERT_GE(top, 0);
+
+  // Per contact node: the force on it, split along the probe's normal there.
+  auto split = [&](int i) {
+    const Eigen::Vector3d f = m.contact_forces().segment<3>(3 * i);
+    const Eigen::Vector3d n = (node(m, i) - m.instrument_pose(0).translation()).normalized();
+    return std::make_pair(f.dot(n), (f - f.dot(n) * n).norm());
+  };
+  ASSERT_TRUE(m.step().converged());
+  const Eigen::Vector3d before = node(m, top);
+  const StepResult small = m.step();
+  ASSERT_TRUE(small.converged()) << small.message;
+  const Eigen::Vector3d F = m.instrument_reaction(0).force;
+  EXPECT_NEAR(node(m, top).x() - before.x(), 0.00002, kTolerance) << "sticks: moves with the probe";
+  EXPECT_GT(std::abs(F.x()), 0.0);
+  const auto [fn, ft] = split(top);
+  EXPECT_LT(ft, 0.9 * mu * fn) << "inside the cone";
+
+  const Eigen::Vector3d before_drag = node(m, top);
+  const StepResult large = m.step();
+  ASSERT_TRUE(large.converged()) << large.message;
+  int sliding = 0;
+  for (int i = 0; i < m.mesh().V.rows(); ++i) {
+    const auto [n_i, t_i] = split(i);
+    if (n_i == 0) continue;
+    EXPECT_NEAR(t_i, mu * n_i, 1e-6 * mu * n_i) << "node " << i << " slides: on the cone";
+    ++sliding;
+  }
+  EXPECT_EQ(sliding, m.instrument_reaction(0).contacts);
+  EXPECT_LT(m.instrument_reaction(0).force.x(), 0.0) << "the tissue drags the probe back";
+  EXPECT_LT(node(m, top).x() - before_drag.x(), 0.5 * 0.004) << "the surface lags behind";
+}
+
+// A closed grasper holds the surface nodes within its radius and carries them with it; opened,
+// it lets the block spring back.
+TEST(Grasper, HoldsWhileClosedAndReleasesWhenOpened) {
+  const double L = 0.02;
+  Scene s = block_scene(3000, 0.45, 0.0);
+  s.solver.dt = 1.0;
+  InstrumentOptions g;
+  g.name = "grasper";
+  g.type = InstrumentOptions::Type::Grasper;
+  g.radius = 0.003;
+  const Eigen::Vector3d at(L / 2, L / 2, L);
+  for (const auto& [t, lift, closed] : std::vector<std::tuple<double, double, bool>>{{1, 0, true}, {2, 0.002, true}, {3, 0.002, false}}) {
+    InstrumentOptions::Keyframe f;
+    f.t = t;
+    f.position = at + Eigen::Vector3d(0, 0, lift);
+    f.closed = closed;
+    g.trajectory.push_back(f);
+  }
+  s.instruments.push_back(g);
+  LiverModel m(make_box_mesh({L, L, L}, {8, 8, 8}), s);
+  ASSERT_TRUE(m.step().converged());
+  const Eigen::VectorXd grasped = m.positions();
+  const StepResult lifted = m.step();
+  ASSERT_TRUE(lifted.converged()) << lifted.message;
+  const LiverModel::InstrumentReaction& held = m.instrument_reaction(0);
+  EXPECT_GE(held.contacts, 5);  // the node under it and its four neighbours 2.5 mm away
+  EXPECT_LT(held.force.z(), 0.0) << "the tissue pulls the grasper down";
+  int moved = 0;
+  for (int i = 0; i < m.mesh().V.rows(); ++i) {
+    const Eigen::Vector3d d = node(m, i) - grasped.segment<3>(3 * i);
+    if (m.mesh().V(i, 2) == L && (grasped.segment<3>(3 * i) - at).norm() <= g.radius) {  // surface nodes
+      EXPECT_NEAR(d.z(), 0.002, kTolerance) << "held node " << i;
+      ++moved;
+    }
+  }
+  EXPECT_EQ(moved, held.contacts);
+  ASSERT_TRUE(m.step().converged());
+  EXPECT_LE(m.displacement().cwiseAbs().maxCoeff(), 1e-9 * L) << "released";
+  EXPECT_EQ(m.instrument_reaction(0).contacts, 0);
+}
+
+// A shaft lying across the top face presses a groove: no penetration, pushed up, and the
+// forces of the tissue on it balance the supports.
+TEST(Shaft, PressesAGrooveWithoutPenetration) {
+  const double L = 0.02, r = 0.003;
+  LiverModel m(make_box_mesh({L, L, L}, {8, 8, 8}), block_scene(3000, 0.45, 0.2));
+  InstrumentOptions o;
+  o.name = "shaft";
+  o.type = InstrumentOptions::Type::Shaft;
+  o.radius = r;
+  o.length = 0.04;
+  // Axis along +x, from x = -10 mm: the orientation turns local z onto x.
+  o.orientation = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::UnitX());
+  o.position = Eigen::Vector3d(-0.01, L / 2, L + r - 0.001);
+  const int k = m.add_instrument(o);
+  const StepResult res = m.step();
+  ASSERT_TRUE(res.converged()) << res.message;
+  const LiverModel::InstrumentReaction& reaction = m.instrument_reaction(k);
+  EXPECT_GE(reaction.contacts, 9) << "a row of nodes along the groove";
+  EXPECT_GT(reaction.force.z(), 0.0);
+  for (int i = 0; i < m.mesh().V.rows(); ++i) {
+    const Eigen::Vector3d x = node(m, i);
+    EXPECT_GE(std::hypot(x.y() - L / 2, x.z() - o.position.z()), r - kTolerance) << "node " << i;
+  }
+  EXPECT_LE((total(m.support_forces()) - reaction.force).norm(), 1e-6 * reaction.force.norm());
+}
+
+// The aspiration tube in frictional contact at its rim: the capsule reduces the lift by a
+// factor near 2 (the reference test's finding); the tissue pulls the tube down onto itself;
+// supports, rim and suction balance.
+TEST(Tube, AspirationBalancesAndTheCapsuleHalvesTheLift) {
+  const Scene scene = load_scene(std::string(LIVER_SIM_SOURCE_DIR) + "/config/scenes/aspiration_tube.yaml");
+  double lift[2];
+  for (int capsule = 0; capsule < 2; ++capsule) {
+    Scene s = scene;
+    s.capsule.enabled = capsule == 1;
+    LiverModel m(load_scene_mesh(s), s);
+    const StepResult r = m.step();
+    ASSERT_TRUE(r.converged()) << r.message;
+    lift[capsule] = m.probe_displacement(0).z();
+    const LiverModel::InstrumentReaction& tube = m.instrument_reaction(0);
+    EXPECT_GT(tube.contacts, 0);
+    EXPECT_GT(tube.force.z(), 0.0) << "the rim holds the tissue down: the tissue pushes the tube up";
+    Eigen::VectorXd suction;
+    m.external_forces(m.positions(), suction);
+    const Eigen::Vector3d sum = total(m.support_forces()) + total(m.contact_forces()) + total(suction);
+    EXPECT_LE(sum.norm(), 1e-6 * tube.force.norm()) << sum.transpose();
+    for (int i = 0; i < m.mesh().V.rows(); ++i)
+      ASSERT_GE(surface_distance(m.instrument(0), m.instrument_pose(0), node(m, i)).distance, -kTolerance) << i;
+  }
+  EXPECT_GT(lift[1], 0.0);
+  EXPECT_GE(lift[0] / lift[1], 1.5);
+  EXPECT_LE(lift[0] / lift[1], 2.5);
+}
+
+// Hertz: a rigid sphere (R = 10 mm) pressed delta = 0.2 mm (contact radius a = 1.41 mm) into a
+// large block (120 x 120 x 60 mm, nu = 0.3, frictionless), the meshes graded towards the contact
+// (sinh mapping; centre spacing 0.75, 0.5, 0.375 mm). F = 4/3 E* R^1/2 delta^3/2.
+// Measured: 19.9%, 12.4%, 6.8% above Hertz, and 4.95% on a 40-division mesh (43 s, not run
+// here); extrapolated from the last three, ~3%, of which the block's finite depth accounts for
+// about 2% (bonded layer, a/D = 0.024). Hence: the error must fall with each refinement and be
+// below 8% on the finest mesh run here.
+TEST(Hertz, SmallIndentationApproachesTheoryUnderRefinement) {
+  const double E = 3000, nu = 0.3, R = 0.01, delta = 0.0002, H = 0.06, D = 0.06, beta = 4.5;
+  const double hertz = 4.0 / 3.0 * E / (1 - nu * nu) * std::sqrt(R) * std::pow(delta, 1.5);
+  auto grade = [beta](double u) { return std::sinh(beta * u) / std::sinh(beta); };  // u in [-1, 1]
+  std::vector<double> error;
+  for (int n : {16, 24, 32}) {
+    TetMesh mesh = make_box_mesh({2 * H, 2 * H, D}, {n, n, n / 2});
+    for (int i = 0; i < mesh.V.rows(); ++i) {
+      mesh.V(i, 0) = H * grade(mesh.V(i, 0) / H - 1);
+      mesh.V(i, 1) = H * grade(mesh.V(i, 1) / H - 1);
+      mesh.V(i, 2) = -D * grade(1 - mesh.V(i, 2) / D);  // top at z = 0
+    }
+    Scene s = block_scene(E, nu, 0.0);
+    s.fixed = {box({-1, -1, -1}, {1, 1, -D + 1e-9})};
+    LiverModel m(mesh, s);
+    m.add_instrument(probe("sphere", {0, 0, R - delta}, R));
+    const StepResult r = m.step();
+    ASSERT_TRUE(r.converged()) << "n = " << n << ": " << r.message;
+    const double F = m.instrument_reaction(0).force.z();
+    error.push_back((F - hertz) / hertz);
+    std::cout << "n = " << n << ": " << m.instrument_reaction(0).contacts << " contacts, F = " << F
+              << " N, Hertz " << hertz << " N, error " << 100 * error.back() << "%\n";
+  }
+  EXPECT_GT(error[2], 0.0) << "linear tetrahedra are stiff, never soft";
+  EXPECT_LT(error[1], error[0]);
+  EXPECT_LT(error[2], error[1]);
+  EXPECT_LT(error[2], 0.08);
+}
+
+// Nothing within the alarm distance: no contact problem is solved and no compliance column is
+// computed, step after step. Brought into contact, both counters move.
+TEST(Contact, PathSkippedWhenNoInstrumentTouches) {
+  const double L = 0.02;
+  Scene s = block_scene(3000, 0.45, 0.3);
+  s.loads.push_back([] {
+    LoadOptions g;
+    g.kind = LoadOptions::Kind::Gravity;
+    g.vector = {0, 0, -9.81};
+    return g;
+  }());
+  s.solver.mode = SolverOptions::Mode::Dynamic;
+  s.solver.dt = 0.01;
+  LiverModel m(make_box_mesh({L, L, L}, {6, 6, 6}), s);
+  InstrumentOptions p = probe("probe", {L / 2, L / 2, L + 0.01}, 0.003);  // 7 mm above
+  const int k = m.add_instrument(p);
+  for (int i = 0; i < 5; ++i) ASSERT_TRUE(m.step().converged());
+  EXPECT_EQ(m.contact_solves(), 0);
+  EXPECT_EQ(m.compliance_columns(), 0);
+  p.position.z() = L + 0.003 - 0.002;  // 2 mm below the rest surface, ~1.3 mm below the sagged one
+  m.update_instrument(k, p);
+  ASSERT_TRUE(m.step().converged());
+  EXPECT_GT(m.contact_solves(), 0);
+  EXPECT_GT(m.compliance_columns(), 0);
+}
+
+// Bad input: a clear error for zero or negative sizes, NaN poses, negative friction; an
+// instrument started deep inside the tissue gives finite positions, converged or rolled back.
+TEST(Contact, BadInputIsRefusedOrStable) {
+  const double L = 0.02;
+  LiverModel m(make_box_mesh({L, L, L}, {6, 6, 6}), block_scene(3000, 0.45, 0.3));
+  EXPECT_THROW(m.add_instrument(probe("zero", {0, 0, 0}, 0.0)), std::invalid_argument);
+  EXPECT_THROW(m.add_instrument(probe("negative", {0, 0, 0}, -1e-3)), std::invalid_argument);
+  EXPECT_THROW(m.add_instrument(probe("nan", {std::nan(""), 0, 0}, 1e-3)), std::invalid_argument);
+  InstrumentOptions tube;
+  tube.name = "tube";
+  tube.type = InstrumentOptions::Type::Tube;
+  tube.inner_radius = 0.006;
+  tube.outer_radius = 0.005;
+  EXPECT_THROW(m.add_instrument(tube), std::invalid_argument);
+  const int k = m.add_instrument(probe("probe", {L / 2, L / 2, L + 0.01}, 0.003));
+  InstrumentOptions bad = m.instrument(k);
+  bad.orientation.coeffs() << 0, 0, 0, std::nan("");
+  EXPECT_THROW(m.update_instrument(k, bad), std::invalid_argument);
+  EXPECT_TRUE(m.instrument(k).orientation.coeffs().allFinite()) << "the last good options are kept";
+  Scene s = block_scene(3000, 0.45, -0.1);
+  EXPECT_THROW(LiverModel(make_box_mesh({L, L, L}, {2, 2, 2}), s), std::invalid_argument);
+
+  InstrumentOptions deep = m.instrument(k);
+  deep.position = Eigen::Vector3d(L / 2, L / 2, L - 0.006);  // centre 6 mm under the surface
+  m.update_instrument(k, deep);
+  const StepResult r = m.step();
+  EXPECT_TRUE(m.positions().allFinite());
+  if (r.status == StepResult::Status::Diverged) {
+    EXPECT_EQ(m.max_displacement(), 0.0) << "rolled back";
+  }
+}
+
+// Dynamics: a probe pressing along a trajectory converges at every step and ends at rest on
+// the same equilibrium as the static solve.
+TEST(Probe, DynamicPressSettlesOnTheStaticEquilibrium) {
+  const double L = 0.02, r = 0.004;
+  Scene s = block_scene(3000, 0.45, 0.3);
+  InstrumentOptions p = probe("probe", Eigen::Vector3d::Zero(), r);
+  const Eigen::Vector3d end(L / 2, L / 2, L + r - 0.0015);
+  for (double t : {0.0, 0.1}) {
+    InstrumentOptions::Keyframe f;
+    f.t = t;
+    f.position = end + Eigen::Vector3d(0, 0, t == 0 ? 0.002 : 0.0);
+    p.trajectory.push_back(f);
+  }
+  s.instruments.push_back(p);
+  s.solver.mode = SolverOptions::Mode::Dynamic;
+  s.solver.dt = 0.01;
+  s.solver.rayleigh_mass = 20;
+  LiverModel dyn(make_box_mesh({L, L, L}, {6, 6, 6}), s);
+  for (int k = 0; k < 150; ++k) {
+    const StepResult res = dyn.step();
+    ASSERT_TRUE(res.converged()) << "step " << k << ": " << res.message;
+  }
+  Scene st = s;
+  st.solver.mode = SolverOptions::Mode::Static;
+  st.solver.dt = 1.0;  // the trajectory's end at the first step
+  LiverModel reference(make_box_mesh({L, L, L}, {6, 6, 6}), st);
+  ASSERT_TRUE(reference.step().converged());
+  EXPECT_NEAR(dyn.instrument_reaction(0).force.z(), reference.instrument_reaction(0).force.z(),
+              0.01 * reference.instrument_reaction(0).force.z());
+}
+
+}  // namespace
+}  // namespace liver_sim
