@@ -4,4 +4,4 @@
 source "$(dirname "$0")/common.sh"
 install_missing_packages
 build_workspace >&2
-exec "$WS/devel/lib/liver_sim/simulate" --scene "$REPO/config/scenes/aspiration_cube.yaml" "$@"
+exec "$WS/devel/lib/liver_sim/simulate" --scene "$REPO/config/scenes/aspiration_tube.yaml" "$@"
