@@ -193,7 +193,7 @@ TEST_P(TetraRotation, TangentMatchesFiniteDifferencesAtRotatedRest) {
   Eigen::VectorXd Kd = Eigen::VectorXd::Zero(x.size());
   Matrix12d Ke;
   for (int e = 0; e < tets.size(); ++e) {
-    tets.element_tangent(e, Ke);
+    tets.element_tangent(e, x, Ke);
     Vector12d de;
     for (int k = 0; k < 4; ++k) de.segment<3>(3 * k) = d.segment<3>(3 * tets.elements()(e, k));
     const Vector12d fe = 2 * Ke * de;
@@ -274,9 +274,10 @@ TEST(MembraneStiffness, MatchesExplicitCstFormula) {
   F << 0, 1, 2;
   const CapsuleOptions c = capsule();
   MembraneCST m(V, F, c);
-  m.update_rotations(Eigen::Map<const Eigen::VectorXd>(Eigen::MatrixXd(V.transpose()).data(), 9));
+  const Eigen::VectorXd rest = Eigen::Map<const Eigen::VectorXd>(Eigen::MatrixXd(V.transpose()).data(), 9);
+  m.update_rotations(rest);
   Matrix9d K;
-  m.element_tangent(0, K);
+  m.element_tangent(0, rest, K);
 
   // Local axes: first edge and its in-plane normal.
   const Eigen::Vector3d e1 = (V.row(1) - V.row(0)).normalized();

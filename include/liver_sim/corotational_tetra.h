@@ -36,11 +36,12 @@ class CorotationalTetra {
   void update_rotations(const Eigen::VectorXd& x);
 
   // Element internal force (12, the force the element needs to be held in shape x) and
-  // tangent, using the rotation from the last update_rotations.
-  void element_force(int e, const Eigen::VectorXd& x, Vector12d& f) const;
-  void element_tangent(int e, Matrix12d& K) const;
-  // Strain energy 1/2 u^T K0 u of the corotated displacement (J), same rotation.
-  double element_energy(int e, const Eigen::VectorXd& x) const;
+  // tangent, using the rotation from the last update_rotations. element_force returns the
+  // strain energy 1/2 u^T K0 u of the corotated displacement (J).
+  double element_force(int e, const Eigen::VectorXd& x, Vector12d& f) const;
+  // R K0 R^T plus the initial-stress stiffness of the tensile stress at x (the rotations of the
+  // last update must be those of x).
+  void element_tangent(int e, const Eigen::VectorXd& x, Matrix12d& K) const;
 
   // Rotation of element e from the last update; rest stiffness; rest volume (m^3).
   const Eigen::Matrix3d& rotation(int e) const { return R_[e]; }
@@ -71,6 +72,7 @@ class CorotationalTetra {
   std::vector<double> volume_;
   std::vector<Matrix12d> K0_;
   std::vector<Eigen::Matrix3d> R_;
+  double lambda_ = 0, mu_ = 0;  // Lame parameters (Pa)
 };
 
 }  // namespace liver_sim

@@ -12,6 +12,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/LU>
+#include <Eigen/SparseCholesky>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -20,6 +21,7 @@
 #include <vector>
 
 #include "liver_sim/cholmod_solver.h"
+#include "liver_sim/conjugate_gradient.h"
 #include "liver_sim/corotational_beam.h"
 #include "liver_sim/corotational_tetra.h"
 #include "liver_sim/gmres.h"
@@ -234,6 +236,9 @@ class LiverModel {
   SparsePattern pattern_;
   std::vector<int> tet_map_, tri_map_, beam_map_;  // scatter maps: 144 per tetrahedron, 81 per triangle, 576 per beam
   std::vector<double> stiffness_, system_;
+  int threads_ = 1;  // OpenMP threads for the element loops
+  std::vector<Eigen::VectorXd> thread_forces_;            // per thread but the first
+  std::vector<std::vector<double>> thread_stiffness_;
   std::vector<double> damping_stiffness_;  // K at the start of a dynamic step (Rayleigh b K)
   std::vector<int> fixed_entries_;      // off-diagonal values in fixed rows/columns
   std::vector<int> scene_fixed_nodes_;
@@ -306,11 +311,18 @@ class LiverModel {
   std::vector<Eigen::Matrix3d> vessel_rotation_;  // per vessel node: its host's rotation
   Eigen::VectorXd vessel_positions_;
   double load_scale_ = 1.0;
-  double state_energy_ = std::numeric_limits<double>::quiet_NaN();  // J, of (x_, v_) when known
+  double state_energy_ = std::numeric_limits<double>::quiet_NaN();
+  Eigen::VectorXd rotations_at_, internal_at_;  // the last internal_forces call: positions (whose rotations are current) and forces
+  double tissue_energy_at_ = 0;  // and the strain energy of its tetrahedra and membranes (J)
+  std::vector<double> thread_energy_;  // J, of (x_, v_) when known
   double time_ = 0.0;
   double force_floor_;   // residual (N) below which a state counts as converged: round-off, 1e-12 E L^2
   double length_scale_;  // bounding-box diagonal (m)
   Gmres gmres_;
+  ConjugateGradient cg_;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Upper> eigen_ldlt_;
+  bool eigen_analyzed_ = false;
+  Eigen::VectorXd jacobi_;  // inverse diagonal of system_ (CG strategy)
 
   // Work vectors kept between steps (no allocation per step).
   Eigen::VectorXd r_, r_try_, dx_, x_try_, f_tmp_, v_tmp_, f_ext_, energy_work_;

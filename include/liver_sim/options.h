@@ -57,7 +57,18 @@ struct LoadOptions {
 
 struct SolverOptions {
   enum class Mode { Static, Dynamic };
+  // How each Newton iteration solves for its update (README, "Fast and accurate"). With
+  // instrument contacts the step uses NewtonKrylov, whose factor the contact solver needs.
+  enum class Strategy {
+    NewtonKrylov,     // GMRES on the true Jacobian, an earlier CHOLMOD factor as preconditioner
+    FullNewton,       // the tangent refactorised (CHOLMOD) and solved directly every iteration
+    FullNewtonEigen,  // the same with Eigen's SimplicialLDLT
+    ReusedFactorCG,   // conjugate gradients on the current tangent, an earlier factor as preconditioner
+    CG,               // conjugate gradients on the current tangent, Jacobi preconditioner
+    ModifiedNewton    // an earlier factor solved directly; refreshed when the residual falls slowly
+  };
   Mode mode = Mode::Static;
+  Strategy strategy = Strategy::NewtonKrylov;
   double dt = 0.01;               // s, time step of the dynamic mode
   int steps = 1;                  // static: load increments; dynamic: time steps
   int max_iterations = 30;        // Newton iterations per step (cap)

@@ -1,5 +1,7 @@
 #include "liver_sim/corotational_tetra.h"
 
+#include <Eigen/Eigenvalues>
+
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <Eigen/SVD>
@@ -49,6 +51,8 @@ void CorotationalTetra::set_material(const ParenchymaOptions& material) {
   const double E = material.young_modulus, nu = material.poisson_ratio;
   const double lambda = E * nu / ((1 + nu) * (1 - 2 * nu));
   const double mu = E / (2 * (1 + nu));
+  lambda_ = lambda;
+  mu_ = mu;
   K0_.resize(volume_.size());
   for (size_t e = 0; e < volume_.size(); ++e) {
     // K_ab = V (lambda g_a g_b^T + mu g_b g_a^T + mu (g_a . g_b) I): isotropic linear elasticity.
@@ -78,12 +82,13 @@ Eigen::Matrix3d CorotationalTetra::rotation_geometric(int e, const Eigen::Vector
 
 Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F) {
   // Fast path (elements not inverted or flattened): scaled Newton iteration for the polar
-  // factor, X <- (g X + X^-T / g) / 2 (Higham 1986), quadratic convergence.
+  // factor, X <- (g X + X^-T / g) / 2 with Frobenius-norm scaling (Higham 1986), to round-off:
+  // the Jacobian products of the Newton-Krylov solver difference the forces at 1e-8 steps.
   if (F.determinant() > 1e-3 * F.squaredNorm() * F.norm()) {
     Eigen::Matrix3d X = F;
     for (int k = 0; k < 20; ++k) {
       const Eigen::Matrix3d X_inv_T = X.inverse().transpose();
-      const double g = std::cbrt(std::abs(1.0 / X.determinant()));  // |det| -> 1
+      const double g = std::sqrt(X_inv_T.norm() / X.norm());
       const Eigen::Matrix3d next = 0.5 * (g * X + X_inv_T / g);
       const double change = (next - X).lpNorm<Eigen::Infinity>();
       X = next;
@@ -129,9 +134,12 @@ Eigen::Matrix3d CorotationalTetra::rotation_polar(int e, const Eigen::VectorXd& 
 
 void CorotationalTetra::update_rotations(const Eigen::VectorXd& x) {
   const int n = size();
+  // Independent per element: split over the cores (OpenMP).
   if (method_ == RotationMethod::Geometric) {
+#pragma omp parallel for schedule(static)
     for (int e = 0; e < n; ++e) R_[e] = rotation_geometric(e, x);
   } else {
+#pragma omp parallel for schedule(static)
     for (int e = 0; e < n; ++e) R_[e] = rotation_polar(e, x);
   }
 }
@@ -149,21 +157,31 @@ Vector12d CorotationalTetra::corotated_displacement(int e, const Eigen::VectorXd
   return u;
 }
 
-void CorotationalTetra::element_force(int e, const Eigen::VectorXd& x, Vector12d& f) const {
-  const Vector12d f_local = K0_[e] * corotated_displacement(e, x);
-  for (int i = 0; i < 4; ++i) f.segment<3>(3 * i) = R_[e] * f_local.segment<3>(3 * i);
-}
-
-double CorotationalTetra::element_energy(int e, const Eigen::VectorXd& x) const {
+double CorotationalTetra::element_force(int e, const Eigen::VectorXd& x, Vector12d& f) const {
+  // lazyProduct: an unrolled fixed-size product, not a call into the general matrix-vector kernel.
   const Vector12d u = corotated_displacement(e, x);
-  return 0.5 * u.dot(K0_[e] * u);
+  const Vector12d f_local = K0_[e].lazyProduct(u);
+  for (int i = 0; i < 4; ++i) f.segment<3>(3 * i) = R_[e] * f_local.segment<3>(3 * i);
+  return 0.5 * u.dot(f_local);
 }
 
-void CorotationalTetra::element_tangent(int e, Matrix12d& K) const {
+void CorotationalTetra::element_tangent(int e, const Eigen::VectorXd& x, Matrix12d& K) const {
   const Eigen::Matrix3d& R = R_[e];
   for (int a = 0; a < 4; ++a)
     for (int b = 0; b < 4; ++b)
       K.block<3, 3>(3 * a, 3 * b).noalias() = R * K0_[e].block<3, 3>(3 * a, 3 * b) * R.transpose();
+  // Initial-stress stiffness V (g_a . sigma g_b) I of the tensile part of the stress: a stretched
+  // element resists being turned. Its compressive part would make the tangent indefinite.
+  const Eigen::Matrix3d strain = corotated_strain(e, x);
+  const Eigen::Matrix3d sigma = lambda_ * strain.trace() * Eigen::Matrix3d::Identity() + 2 * mu_ * strain;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen;
+  eigen.computeDirect(sigma);
+  if (eigen.eigenvalues().maxCoeff() <= 0) return;
+  const Eigen::Matrix3d tension =
+      eigen.eigenvectors() * eigen.eigenvalues().cwiseMax(0.0).asDiagonal() * eigen.eigenvectors().transpose();
+  const Eigen::Matrix4d G = volume_[e] * grad_N_[e] * tension * grad_N_[e].transpose();
+  for (int a = 0; a < 4; ++a)
+    for (int b = 0; b < 4; ++b) K.block<3, 3>(3 * a, 3 * b).diagonal().array() += G(a, b);
 }
 
 Eigen::Matrix3d CorotationalTetra::corotated_strain(int e, const Eigen::VectorXd& x) const {

@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <Eigen/LU>
+#include <omp.h>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -89,6 +90,14 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
   beam_map_.reserve(576 * beam_groups.size());
   for (const std::vector<int>& g : beam_groups) pattern_.append_scatter_map(g.data(), 8, beam_map_);
   stiffness_.assign(pattern_.nonzeros(), 0.0);
+  threads_ = std::max(1, omp_get_max_threads());
+  thread_forces_.resize(threads_);
+  thread_energy_.assign(threads_, 0.0);
+  thread_stiffness_.assign(threads_, std::vector<double>());
+  for (int t = 1; t < threads_; ++t) {
+    thread_forces_[t].setZero(dofs);
+    thread_stiffness_[t].assign(pattern_.nonzeros(), 0.0);
+  }
   damping_stiffness_.assign(pattern_.nonzeros(), 0.0);
   system_.assign(pattern_.nonzeros(), 0.0);
   solver_cholmod_.analyze(pattern_.rows(), pattern_.column_start(), pattern_.row_index());
@@ -317,6 +326,7 @@ std::string LiverModel::set_capsule(const CapsuleOptions& capsule) {
   }
   membrane_.set_material(capsule);
   state_energy_ = std::numeric_limits<double>::quiet_NaN();
+  rotations_at_.resize(0);  // the membrane rotations may not follow the last evaluation
   capsule_active_ = std::move(active);
   capsule_ = capsule;
   factor_valid_ = false;
@@ -356,22 +366,49 @@ Eigen::Vector3d LiverModel::probe_displacement(int i) const {
 }
 
 void LiverModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
+  // The last evaluation is kept: a step starts where the previous one ended, and the energy
+  // check looks at the state the line search accepted.
+  if (rotations_at_.size() == x.size() && rotations_at_ == x) {
+    f = internal_at_;
+    return;
+  }
   f.setZero(x.size());
   tetra_.update_rotations(x);
-  Vector12d fe;
-  for (int e = 0; e < tetra_.size(); ++e) {
-    tetra_.element_force(e, x, fe);
-    for (int k = 0; k < 4; ++k) f.segment<3>(3 * mesh_.T(e, k)) += fe.segment<3>(3 * k);
-  }
-  if (capsule_.enabled) {
-    membrane_.update_rotations(x);
-    Vector9d fm;
-    for (int t : capsule_active_) {
-      membrane_.element_force(t, x, fm);
-      for (int k = 0; k < 3; ++k) f.segment<3>(3 * boundary_(t, k)) += fm.segment<3>(3 * k);
+  if (capsule_.enabled) membrane_.update_rotations(x);
+  // Elements split over the cores, each thread adding into its own force vector (thread 0
+  // into f); the vectors are summed in a fixed order, so a result depends only on the thread count.
+  const int active = static_cast<int>(capsule_active_.size());
+#pragma omp parallel num_threads(threads_)
+  {
+    const int thread = omp_get_thread_num();
+    Eigen::VectorXd& ft = thread == 0 ? f : thread_forces_[thread];
+    if (thread > 0) ft.setZero(x.size());
+    double energy = 0;  // the strain energy comes with the forces, at little extra cost
+    Vector12d fe;
+#pragma omp for schedule(static) nowait
+    for (int e = 0; e < tetra_.size(); ++e) {
+      energy += tetra_.element_force(e, x, fe);
+      for (int k = 0; k < 4; ++k) ft.segment<3>(3 * mesh_.T(e, k)) += fe.segment<3>(3 * k);
     }
+    if (capsule_.enabled) {
+      Vector9d fm;
+#pragma omp for schedule(static) nowait
+      for (int i = 0; i < active; ++i) {
+        const int t = capsule_active_[i];
+        energy += membrane_.element_force(t, x, fm);
+        for (int k = 0; k < 3; ++k) ft.segment<3>(3 * boundary_(t, k)) += fm.segment<3>(3 * k);
+      }
+    }
+    thread_energy_[thread] = energy;
+  }
+  tissue_energy_at_ = thread_energy_[0];
+  for (int thread = 1; thread < threads_; ++thread) {
+    f += thread_forces_[thread];
+    tissue_energy_at_ += thread_energy_[thread];
   }
   if (beams_) add_beam_forces(x, f);
+  rotations_at_ = x;
+  internal_at_ = f;
 }
 
 void LiverModel::add_beam_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
@@ -410,11 +447,8 @@ Eigen::Matrix<double, 12, 24> LiverModel::beam_mapping(int e) const {
 }
 
 double LiverModel::elastic_energy(const Eigen::VectorXd& x) {
-  internal_forces(x, energy_work_);  // brings every rotation and beam frame to x
-  double energy = 0;
-  for (int e = 0; e < tetra_.size(); ++e) energy += tetra_.element_energy(e, x);
-  if (capsule_.enabled)
-    for (int t : capsule_active_) energy += membrane_.element_energy(t, x);
+  internal_forces(x, energy_work_);  // brings every rotation and beam frame to x (often already there)
+  double energy = tissue_energy_at_;
   for (int e = 0; e < num_beams(); ++e) energy += beams_->element_energy(e);
   return energy;
 }
@@ -469,7 +503,7 @@ double LiverModel::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double
     // Backward Euler: M (v - v_n)/dt + D v = f_ext - f_int, v = (x - x_n)/dt, D = a M + b K.
     v_tmp_ = (x - x_start_) / dt;
     r -= mass_.cwiseProduct((v_tmp_ - v_) / dt + solver_.rayleigh_mass * v_tmp_);
-    if (solver_.rayleigh_stiffness > 0) {
+    if (solver_.rayleigh_stiffness > 0 && !v_tmp_.isZero(0.0)) {  // v = 0 as a step starts
       pattern_.multiply(damping_stiffness_, v_tmp_, f_tmp_);
       r -= solver_.rayleigh_stiffness * f_tmp_;
     }
@@ -481,19 +515,31 @@ double LiverModel::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double
 }
 
 void LiverModel::assemble_system() {
-  std::fill(stiffness_.begin(), stiffness_.end(), 0.0);
-  Matrix12d Ke;
-  for (int e = 0; e < tetra_.size(); ++e) {
-    tetra_.element_tangent(e, Ke);
-    scatter_add(Ke, &tet_map_[144 * e], stiffness_);
-  }
-  if (capsule_.enabled) {
-    Matrix9d Km;
-    for (int t : capsule_active_) {
-      membrane_.element_tangent(t, Km);
-      scatter_add(Km, &tri_map_[81 * t], stiffness_);
+  const int active = static_cast<int>(capsule_active_.size());
+#pragma omp parallel num_threads(threads_)
+  {  // as internal_forces: one matrix value array per thread, summed in order
+    const int thread = omp_get_thread_num();
+    std::vector<double>& kt = thread == 0 ? stiffness_ : thread_stiffness_[thread];
+    std::fill(kt.begin(), kt.end(), 0.0);
+    Matrix12d Ke;
+#pragma omp for schedule(static) nowait
+    for (int e = 0; e < tetra_.size(); ++e) {
+      tetra_.element_tangent(e, rotations_at_, Ke);
+      scatter_add(Ke, &tet_map_[144 * e], kt);
+    }
+    if (capsule_.enabled) {
+      Matrix9d Km;
+#pragma omp for schedule(static) nowait
+      for (int i = 0; i < active; ++i) {
+        const int t = capsule_active_[i];
+        membrane_.element_tangent(t, rotations_at_, Km);
+        scatter_add(Km, &tri_map_[81 * t], kt);
+      }
     }
   }
+  for (int thread = 1; thread < threads_; ++thread)
+    for (size_t k = 0; k < stiffness_.size(); ++k) stiffness_[k] += thread_stiffness_[thread][k];
+  Matrix12d Ke;
   for (int e = 0; e < num_beams(); ++e) {
     beams_->element_tangent(e, Ke);
     const Eigen::Matrix<double, 12, 24> J = beam_mapping(e);
@@ -634,20 +680,42 @@ void LiverModel::newton(StepResult& result) {
       break;
     }
     ++result.iterations;
-    // Rayleigh damping uses the stiffness at the start of the step, fixed within the step, so
-    // that the residual stays one function of x while Newton iterates. (v = 0 there, so the
-    // residual already computed is unchanged.)
-    const bool damping_snapshot = result.iterations == 1 && solver_.mode == SolverOptions::Mode::Dynamic &&
-                                  solver_.rayleigh_stiffness > 0;
-    if (!factor_valid_ || damping_snapshot) {
+    // Rayleigh damping uses the stiffness of the last tangent assembled at the start of a step,
+    // fixed within the step, so that the residual stays one function of x while Newton
+    // iterates. (v = 0 there, so the residual already computed is unchanged.) A step that
+    // reuses the factor keeps the damping of the step that made it: no assembly per frame.
+    const bool damping_snapshot = result.iterations - iterations_before == 1 &&
+                                  solver_.mode == SolverOptions::Mode::Dynamic && solver_.rayleigh_stiffness > 0;
+    using Strategy = SolverOptions::Strategy;
+    const Strategy strategy = contacts_.empty() ? solver_.strategy : Strategy::NewtonKrylov;
+    const bool current_tangent = strategy == Strategy::FullNewton || strategy == Strategy::FullNewtonEigen ||
+                                 strategy == Strategy::ReusedFactorCG || strategy == Strategy::CG;
+    if (strategy == Strategy::FullNewton) factor_valid_ = false;
+    const bool uses_factor = strategy != Strategy::FullNewtonEigen && strategy != Strategy::CG;
+    if (!factor_valid_ || current_tangent) {
       t0 = Clock::now();
       assemble_system();
       if (damping_snapshot) damping_stiffness_ = stiffness_;
       result.timing.assembly_ms += ms_since(t0);
     }
+    if (strategy == Strategy::FullNewtonEigen) {
+      t0 = Clock::now();
+      const Eigen::Map<const Eigen::SparseMatrix<double>> A(pattern_.rows(), pattern_.rows(), pattern_.nonzeros(),
+                                                            pattern_.column_start().data(), pattern_.row_index().data(),
+                                                            system_.data());
+      if (!eigen_analyzed_) eigen_ldlt_.analyzePattern(A);
+      eigen_analyzed_ = true;
+      eigen_ldlt_.factorize(A);
+      result.timing.factorization_ms += ms_since(t0);
+      ++result.factorizations;
+      if (eigen_ldlt_.info() != Eigen::Success || (eigen_ldlt_.vectorD().array() <= 0).any()) {
+        fail("tangent matrix is not positive definite");
+        break;
+      }
+    }
     // The factor of an earlier tangent keeps serving as the preconditioner (GMRES works on the
     // true Jacobian) until it no longer preconditions well or the constraints changed.
-    if (!factor_valid_) {
+    if (uses_factor && !factor_valid_) {
       t0 = Clock::now();
       const bool factored = solver_cholmod_.factorize(system_);
       result.timing.factorization_ms += ms_since(t0);
@@ -675,17 +743,33 @@ void LiverModel::newton(StepResult& result) {
     const Gmres::Operator preconditioner = [&](const Eigen::VectorXd& in, Eigen::VectorXd& out) {
       solver_cholmod_.solve(in, out);
     };
-    int krylov;
-    if (contacts_.empty()) {
+    const Gmres::Operator tangent = [&](const Eigen::VectorXd& v, Eigen::VectorXd& out) {
+      pattern_.multiply(system_, v, out);
+    };
+    int krylov = 0;
+    if (strategy == Strategy::FullNewton || strategy == Strategy::ModifiedNewton) {
+      solver_cholmod_.solve(r_, dx_);
+    } else if (strategy == Strategy::FullNewtonEigen) {
+      dx_ = eigen_ldlt_.solve(r_);
+    } else if (strategy == Strategy::ReusedFactorCG) {
+      krylov = cg_.solve(tangent, preconditioner, r_, dx_, forcing, kMaxKrylov);
+      if (krylov > kRefactorAfter || cg_.relative_residual() > forcing) factor_valid_ = false;
+    } else if (strategy == Strategy::CG) {
+      jacobi_.resize(pattern_.rows());
+      for (int i = 0; i < pattern_.rows(); ++i) jacobi_[i] = 1.0 / system_[pattern_.diagonal(i)];
+      const Gmres::Operator jacobi = [&](const Eigen::VectorXd& in, Eigen::VectorXd& out) { out = jacobi_.cwiseProduct(in); };
+      krylov = cg_.solve(tangent, jacobi, r_, dx_, forcing, 20 * kMaxKrylov * kMaxKrylov);
+    } else if (contacts_.empty()) {
       krylov = gmres_.solve(jacobian, preconditioner, r_, dx_, forcing, kMaxKrylov);
+      if (krylov > kRefactorAfter || gmres_.relative_residual() > forcing) factor_valid_ = false;
     } else {
       const auto t_contact = Clock::now();
       krylov = contact_update(jacobian, forcing, result);
       result.timing.contact_ms += ms_since(t_contact);
+      if (krylov > kRefactorAfter || gmres_.relative_residual() > forcing) factor_valid_ = false;
     }
     result.linear_iterations += krylov;
     result.timing.solve_ms += ms_since(t0);
-    if (krylov > kRefactorAfter || gmres_.relative_residual() > forcing) factor_valid_ = false;
     if (!dx_.allFinite()) {
       fail("non-finite Newton update");
       break;
@@ -725,6 +809,8 @@ void LiverModel::newton(StepResult& result) {
     result.timing.assembly_ms += ms_since(t0);
     x_.swap(x_try_);
     r_.swap(r_try_);
+    // Modified Newton keeps its factor while it contracts the residual well.
+    if (strategy == Strategy::ModifiedNewton && best_norm > 0.9 * norm) factor_valid_ = false;
     norm = best_norm;
     reference = ref_try;
     if (detect_contacts(x_)) norm = residual(x_, r_, &reference);

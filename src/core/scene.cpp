@@ -338,8 +338,19 @@ class Reader {
   }
 
   void read_solver(const YAML::Node& v, SolverOptions& o) const {
-    check_keys(v, "solver", {"mode", "dt", "steps", "max_iterations", "tolerance", "line_search",
+    check_keys(v, "solver", {"mode", "strategy", "dt", "steps", "max_iterations", "tolerance", "line_search",
                              "rayleigh_mass", "rayleigh_stiffness"});
+    if (v["strategy"]) {
+      using S = SolverOptions::Strategy;
+      const std::string w = word(v["strategy"], "solver.strategy",
+                                 {"newton_krylov", "full_newton", "full_newton_eigen", "reused_factor_cg", "cg", "modified_newton"});
+      o.strategy = w == "newton_krylov"       ? S::NewtonKrylov
+                   : w == "full_newton"       ? S::FullNewton
+                   : w == "full_newton_eigen" ? S::FullNewtonEigen
+                   : w == "reused_factor_cg"  ? S::ReusedFactorCG
+                   : w == "cg"                ? S::CG
+                                              : S::ModifiedNewton;
+    }
     if (v["mode"])
       o.mode = word(v["mode"], "solver.mode", {"static", "dynamic"}) == "static" ? SolverOptions::Mode::Static
                                                                                 : SolverOptions::Mode::Dynamic;

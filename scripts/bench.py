@@ -1,0 +1,126 @@
+#!/usr/bin/python3
+"""Run time against error for every solver strategy (README, "Fast and accurate").
+
+Runs the `bench` tool (the scene's equilibrium, then breathing loads 1 + 0.5 sin(2 pi t)) on the
+aspiration cube at about 2k, 10k and 50k tetrahedra (frames of 1 ms) and on the liver phantom
+(11k tetrahedra, frames of 10 ms), writes doc/bench.csv and draws
+  doc/bench_pareto.png   error against time per frame (the Pareto front), per mesh
+  doc/bench_scaling.png  time per frame and one factorisation against DOFs (log-log, fitted exponents)
+Pin it: taskset -c 0 scripts/bench.py (one core), or taskset -c 0,1 (both, OpenMP).
+  --quick   the 2k cube only, 20 frames, three strategies (the test suite's smoke run)
+"""
+import argparse
+import csv
+import io
+import os
+import subprocess
+import sys
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BENCH = os.path.join(REPO, "build/ws/devel/lib/liver_sim/bench")
+CUBE = os.path.join(REPO, "config/scenes/aspiration_cube.yaml")
+PHANTOM = os.path.join(REPO, "config/scenes/liver_phantom.yaml")
+
+ALL = ["newton_krylov:30:1e-6", "newton_krylov:1:0", "full_newton:30:1e-6", "full_newton_eigen:30:1e-6",
+       "reused_factor_cg:30:1e-6", "cg:30:1e-6", "modified_newton:1:0", "modified_newton:2:0"]
+LARGE = ["newton_krylov:30:1e-6", "newton_krylov:1:0", "full_newton:30:1e-6", "reused_factor_cg:30:1e-6",
+         "modified_newton:1:0", "modified_newton:2:0"]
+
+
+def cases(quick):
+    if quick:
+        return [("cube 2k", CUBE, ["mesh.box.divisions.0=8", "mesh.box.divisions.1=8", "mesh.box.divisions.2=8",
+                                   "solver.dt=0.001"], 20, ["newton_krylov:30:1e-6", "full_newton_eigen:30:1e-6",
+                                                            "modified_newton:1:0"])]
+    out = []
+    # Jacobi-preconditioned CG only on the small cube: with the capsule it needs thousands of
+    # iterations per update on the larger meshes.
+    for label, n, frames, strategies in [("cube 2k", 8, 200, ALL), ("cube 10k", 13, 100, LARGE + ["full_newton_eigen:30:1e-6"]),
+                                         ("cube 50k", 22, 30, LARGE)]:
+        out.append((label, CUBE, [f"mesh.box.divisions.{i}={n}" for i in range(3)] + ["solver.dt=0.001"], frames, strategies))
+    out.append(("phantom 11k", PHANTOM, ["solver.dt=0.01"], 50, LARGE + ["full_newton_eigen:30:1e-6"]))
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--bench", default=BENCH)
+    ap.add_argument("--out", default=os.path.join(REPO, "doc"))
+    args = ap.parse_args()
+    if not os.path.exists(args.bench):
+        sys.exit(f"{args.bench} not found: build first (scripts/run.sh)")
+    rows = []
+    for label, scene, sets, frames, strategies in cases(args.quick):
+        cmd = [args.bench, "--scene", scene, "--frames", str(frames)]
+        for s in sets:
+            cmd += ["--set", s]
+        for s in strategies:
+            cmd += ["--strategy", s]
+        print(f"bench: {label}: {len(strategies)} strategies, {frames} frames ...", file=sys.stderr, flush=True)
+        out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+        for row in csv.DictReader(io.StringIO(out)):
+            row["case"] = label
+            rows.append(row)
+            print(f"  {row['strategy']}:{row['iterations']}  mean {float(row['mean_ms']):.2f} ms  "
+                  f"error {float(row['max_error']):.2e}", file=sys.stderr, flush=True)
+    for row in rows:
+        if int(row["diverged"]) > 0 or not float(row["max_error"]) < 1:
+            print(f"bench: {row['case']} {row['strategy']}:{row['iterations']}: {row['diverged']} frames rolled back, "
+                  f"error {row['max_error']}", file=sys.stderr)
+    if args.quick:  # the smoke run checks that the driver works, not how fast
+        exact = [r for r in rows if r["strategy"] == "newton_krylov"]
+        if not exact or float(exact[0]["max_error"]) > 1e-4:
+            sys.exit("bench: the tolerance-driven run does not match the reference")
+        print(f"bench: smoke ok ({len(rows)} strategies)")
+        return
+    os.makedirs(args.out, exist_ok=True)
+    fields = ["case"] + [k for k in rows[0] if k != "case"]
+    with open(os.path.join(args.out, "bench.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=fields)
+        w.writeheader()
+        w.writerows(rows)
+    plot(rows, args.out)
+
+
+def plot(rows, out):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, axes = plt.subplots(1, len({r["case"] for r in rows}), figsize=(16, 4.2), sharey=True)
+    for ax, case in zip(axes, dict.fromkeys(r["case"] for r in rows)):
+        for r in (r for r in rows if r["case"] == case):
+            label = f"{r['strategy']}:{r['iterations']}"
+            ax.scatter(float(r["mean_ms"]), max(float(r["max_error"]), 1e-9), s=30)
+            ax.annotate(label, (float(r["mean_ms"]), max(float(r["max_error"]), 1e-9)), fontsize=6)
+        ax.axhline(0.01, color="0.6", ls="--", lw=0.8)
+        ax.set(xscale="log", yscale="log", xlabel="mean time per frame (ms)", title=case)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("max displacement error / peak motion")
+    fig.suptitle("Error against time per frame (1% line dashed)")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "bench_pareto.png"), dpi=90)
+
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    cubes = [r for r in rows if r["case"].startswith("cube")]
+    series = {"newton_krylov:30 (to 1e-6)": ("newton_krylov", "30", "mean_ms"),
+              "modified_newton:1": ("modified_newton", "1", "mean_ms"),
+              "one factorisation": ("full_newton", "30", "factorization_ms")}
+    for label, (strategy, its, key) in series.items():
+        pts = sorted((int(r["dofs"]), float(r[key])) for r in cubes if r["strategy"] == strategy and r["iterations"] == its)
+        if len(pts) < 2:
+            continue
+        x, y = np.array(pts).T
+        slope = np.polyfit(np.log(x), np.log(y), 1)[0]
+        ax.loglog(x, y, "o-", label=f"{label}: ~DOFs^{slope:.2f}")
+    ax.set(xlabel="DOFs (aspiration cube)", ylabel="ms", title="Cost against problem size")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, which="both")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "bench_scaling.png"), dpi=90)
+
+
+if __name__ == "__main__":
+    main()

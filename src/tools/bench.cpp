@@ -1,0 +1,182 @@
+// Run time against error (README, "Fast and accurate"). The scenario: the scene's static
+// equilibrium (solved once, tightly), then dynamic frames of solver.dt in which the scene's loads
+// breathe, scaled by 1 + A sin(2 pi f t) (suction on the cube, gravity on the liver: the smooth
+// inputs of an OR session). Each solver strategy runs it, every frame timed, and its displacement
+// field is compared with a converged reference run (Newton-Krylov to a residual of 1e-10).
+//   bench --scene FILE [--set K=V]... [--frames N] [--amplitude A] [--frequency F]
+//         [--strategy SPEC]... [--csv FILE] [--quiet]
+// SPEC is STRATEGY[:ITERATIONS[:TOLERANCE]]: the solver.strategy, the Newton iterations allowed
+// per frame (solver.max_iterations) and the residual tolerance (solver.tolerance; 0 means "always
+// do ITERATIONS"). One CSV row per strategy on standard output (or --csv), progress on stderr.
+// Pin it (taskset -c 0) for timings.
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "liver_sim/liver_model.h"
+
+namespace {
+
+using liver_sim::LiverModel;
+using liver_sim::Scene;
+using liver_sim::StepResult;
+
+const char* kUsage =
+    "usage: bench --scene FILE [--set K=V]... [--frames N] [--amplitude A] [--frequency HZ]\n"
+    "             [--strategy STRATEGY[:ITERATIONS[:TOLERANCE]]]... [--csv FILE] [--quiet]\n"
+    "  strategies: newton_krylov, full_newton, full_newton_eigen, reused_factor_cg, cg, modified_newton\n";
+
+struct Spec {
+  std::string text, strategy;
+  int iterations = 30;
+  double tolerance = 1e-6;
+};
+
+struct Run {
+  std::vector<double> frame_ms;
+  std::vector<Eigen::VectorXd> displacement;  // per frame
+  int newton_iterations = 0, factorizations = 0, linear_iterations = 0, diverged = 0;
+  double factorization_ms = 0;
+  long tets = 0, dofs = 0;
+};
+
+Spec parse_spec(const std::string& s) {
+  Spec spec;
+  spec.text = s;
+  std::stringstream in(s);
+  std::string part;
+  std::getline(in, spec.strategy, ':');
+  if (std::getline(in, part, ':')) spec.iterations = std::stoi(part);
+  if (std::getline(in, part, ':')) spec.tolerance = std::stod(part);
+  return spec;
+}
+
+struct Loading {
+  int frames = 100;
+  double amplitude = 0.5, frequency = 1.0;  // -, Hz
+};
+
+// The scene's static equilibrium, to a residual of 1e-10.
+Eigen::VectorXd equilibrium(const std::string& scene_path, std::vector<std::string> overrides) {
+  for (const char* o : {"solver.mode=static", "solver.strategy=newton_krylov", "solver.max_iterations=100",
+                        "solver.tolerance=1e-10"})
+    overrides.push_back(o);
+  const Scene scene = liver_sim::load_scene(scene_path, overrides);
+  LiverModel model(liver_sim::load_scene_mesh(scene), scene);
+  const StepResult r = model.step();
+  if (!r.converged()) throw std::runtime_error("the static equilibrium did not converge: " + r.message);
+  return model.positions();
+}
+
+Run run(const std::string& scene_path, std::vector<std::string> overrides, const Spec& spec, const Loading& loading,
+        const Eigen::VectorXd& start, bool quiet) {
+  const int frames = loading.frames;
+  overrides.push_back("solver.mode=dynamic");
+  overrides.push_back("solver.strategy=" + spec.strategy);
+  overrides.push_back("solver.max_iterations=" + std::to_string(spec.iterations));
+  std::ostringstream tol;
+  tol << std::setprecision(17) << (spec.tolerance > 0 ? spec.tolerance : 1e-300);
+  overrides.push_back("solver.tolerance=" + tol.str());
+  const Scene scene = liver_sim::load_scene(scene_path, overrides);
+  LiverModel model(liver_sim::load_scene_mesh(scene), scene);
+  model.set_positions(start);
+  Run r;
+  r.tets = model.mesh().T.rows();
+  r.dofs = 3 * model.mesh().V.rows();
+  for (int k = 0; k < frames; ++k) {
+    const double t = (k + 1) * scene.solver.dt;
+    model.set_load_scale(1 + loading.amplitude * std::sin(2 * M_PI * loading.frequency * t));
+    const StepResult s = model.step();
+    r.frame_ms.push_back(s.timing.total_ms);
+    r.displacement.push_back(model.positions() - start);
+    r.newton_iterations += s.iterations;
+    r.factorizations += s.factorizations;
+    r.linear_iterations += s.linear_iterations;
+    r.factorization_ms += s.timing.factorization_ms;
+    r.diverged += s.status == StepResult::Status::Diverged;
+  }
+  if (!quiet)
+    std::cerr << "bench: " << spec.text << ": " << r.tets << " tetrahedra, " << frames << " frames, "
+              << r.newton_iterations << " Newton iterations, " << r.factorizations << " factorisations\n";
+  return r;
+}
+
+double percentile(std::vector<double> v, double p) {
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<size_t>(p * v.size()))];
+}
+
+int main_checked(int argc, char** argv) {
+  std::string scene, csv;
+  std::vector<std::string> overrides;
+  std::vector<Spec> specs;
+  Loading loading;
+  bool quiet = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const bool has_value = i + 1 < argc;
+    if (a == "--scene" && has_value) scene = argv[++i];
+    else if (a == "--set" && has_value) overrides.push_back(argv[++i]);
+    else if (a == "--frames" && has_value) loading.frames = std::stoi(argv[++i]);
+    else if (a == "--amplitude" && has_value) loading.amplitude = std::stod(argv[++i]);
+    else if (a == "--frequency" && has_value) loading.frequency = std::stod(argv[++i]);
+    else if (a == "--strategy" && has_value) specs.push_back(parse_spec(argv[++i]));
+    else if (a == "--csv" && has_value) csv = argv[++i];
+    else if (a == "--quiet") quiet = true;
+    else {
+      std::cerr << kUsage;
+      return 2;
+    }
+  }
+  const int frames = loading.frames;
+  if (scene.empty() || specs.empty() || frames < 1) {
+    std::cerr << kUsage;
+    return 2;
+  }
+  Spec reference_spec = parse_spec("newton_krylov:50:1e-10");
+  reference_spec.text = "reference";
+  const Eigen::VectorXd start = equilibrium(scene, overrides);
+  const Run reference = run(scene, overrides, reference_spec, loading, start, quiet);
+  double peak = 0;  // errors are relative to the largest motion from the equilibrium in the reference run
+  for (const Eigen::VectorXd& u : reference.displacement) peak = std::max(peak, u.cwiseAbs().maxCoeff());
+
+  std::ofstream file;
+  if (!csv.empty()) file.open(csv);
+  std::ostream& out = csv.empty() ? std::cout : file;
+  out << "scene,tetrahedra,dofs,strategy,iterations,tolerance,frames,median_ms,mean_ms,p95_ms,fps,max_error,"
+         "final_error,newton_iterations,linear_iterations,factorizations,factorization_ms,diverged\n"
+      << std::setprecision(6);
+  for (const Spec& spec : specs) {
+    const Run r = run(scene, overrides, spec, loading, start, quiet);
+    double max_error = 0;
+    for (int k = 0; k < frames; ++k)
+      max_error = std::max(max_error, (r.displacement[k] - reference.displacement[k]).cwiseAbs().maxCoeff());
+    const double final_error = (r.displacement.back() - reference.displacement.back()).cwiseAbs().maxCoeff();
+    double mean = 0;
+    for (double t : r.frame_ms) mean += t / frames;
+    out << scene << ',' << r.tets << ',' << r.dofs << ',' << spec.strategy << ',' << spec.iterations << ','
+        << spec.tolerance << ',' << frames << ',' << percentile(r.frame_ms, 0.5) << ',' << mean << ','
+        << percentile(r.frame_ms, 0.95) << ',' << 1000.0 / mean << ',' << max_error / peak << ','
+        << final_error / peak << ',' << r.newton_iterations << ',' << r.linear_iterations << ','
+        << r.factorizations << ',' << (r.factorizations ? r.factorization_ms / r.factorizations : 0.0) << ','
+        << r.diverged << '\n';
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return main_checked(argc, argv);
+  } catch (const std::exception& e) {
+    std::cerr << "bench: " << e.what() << "\n";
+    return 1;
+  }
+}
