@@ -39,9 +39,7 @@ class CorotationalTetra {
   // tangent, using the rotation from the last update_rotations. element_force returns the
   // strain energy 1/2 u^T K0 u of the corotated displacement (J).
   double element_force(int e, const Eigen::VectorXd& x, Vector12d& f) const;
-  // R K0 R^T plus the initial-stress stiffness of the tensile stress at x (the rotations of the
-  // last update must be those of x).
-  void element_tangent(int e, const Eigen::VectorXd& x, Matrix12d& K) const;
+  void element_tangent(int e, Matrix12d& K) const;
 
   // Rotation of element e from the last update; rest stiffness; rest volume (m^3).
   const Eigen::Matrix3d& rotation(int e) const { return R_[e]; }
@@ -72,7 +70,6 @@ class CorotationalTetra {
   std::vector<double> volume_;
   std::vector<Matrix12d> K0_;
   std::vector<Eigen::Matrix3d> R_;
-  double lambda_ = 0, mu_ = 0;  // Lame parameters (Pa)
 };
 
 }  // namespace liver_sim

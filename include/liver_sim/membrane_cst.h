@@ -25,9 +25,7 @@ class MembraneCST {
   // Updates the in-plane frame of every triangle from current positions x (3 #V).
   void update_rotations(const Eigen::VectorXd& x);
   double element_force(int e, const Eigen::VectorXd& x, Vector9d& f) const;  // returns 1/2 u^T K u (J)
-  // In-plane stiffness in the current frame plus the initial-stress stiffness of the tensile
-  // stress at x (the frames of the last update must be those of x).
-  void element_tangent(int e, const Eigen::VectorXd& x, Matrix9d& K) const;
+  void element_tangent(int e, Matrix9d& K) const;
 
   // Small-strain corotated in-plane strain, sym(R^T F) - I (2x2) of triangle e, for tests.
   Eigen::Matrix2d corotated_strain(int e, const Eigen::VectorXd& x) const;
@@ -50,7 +48,6 @@ class MembraneCST {
   std::vector<double> area_;
   std::vector<Eigen::Matrix<double, 6, 6>> K2_;    // in-plane stiffness, 2D local frame
   std::vector<Eigen::Matrix<double, 3, 2>> frame_; // from the last update_rotations
-  double lambda_ = 0, mu_ = 0, thickness_ = 0;       // plane-stress Lame parameters (Pa), h (m)
 };
 
 }  // namespace liver_sim

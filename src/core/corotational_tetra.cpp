@@ -1,6 +1,5 @@
 #include "liver_sim/corotational_tetra.h"
 
-#include <Eigen/Eigenvalues>
 
 #include <Eigen/Geometry>
 #include <Eigen/LU>
@@ -51,8 +50,6 @@ void CorotationalTetra::set_material(const ParenchymaOptions& material) {
   const double E = material.young_modulus, nu = material.poisson_ratio;
   const double lambda = E * nu / ((1 + nu) * (1 - 2 * nu));
   const double mu = E / (2 * (1 + nu));
-  lambda_ = lambda;
-  mu_ = mu;
   K0_.resize(volume_.size());
   for (size_t e = 0; e < volume_.size(); ++e) {
     // K_ab = V (lambda g_a g_b^T + mu g_b g_a^T + mu (g_a . g_b) I): isotropic linear elasticity.
@@ -165,23 +162,11 @@ double CorotationalTetra::element_force(int e, const Eigen::VectorXd& x, Vector1
   return 0.5 * u.dot(f_local);
 }
 
-void CorotationalTetra::element_tangent(int e, const Eigen::VectorXd& x, Matrix12d& K) const {
+void CorotationalTetra::element_tangent(int e, Matrix12d& K) const {
   const Eigen::Matrix3d& R = R_[e];
   for (int a = 0; a < 4; ++a)
     for (int b = 0; b < 4; ++b)
       K.block<3, 3>(3 * a, 3 * b).noalias() = R * K0_[e].block<3, 3>(3 * a, 3 * b) * R.transpose();
-  // Initial-stress stiffness V (g_a . sigma g_b) I of the tensile part of the stress: a stretched
-  // element resists being turned. Its compressive part would make the tangent indefinite.
-  const Eigen::Matrix3d strain = corotated_strain(e, x);
-  const Eigen::Matrix3d sigma = lambda_ * strain.trace() * Eigen::Matrix3d::Identity() + 2 * mu_ * strain;
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen;
-  eigen.computeDirect(sigma);
-  if (eigen.eigenvalues().maxCoeff() <= 0) return;
-  const Eigen::Matrix3d tension =
-      eigen.eigenvectors() * eigen.eigenvalues().cwiseMax(0.0).asDiagonal() * eigen.eigenvectors().transpose();
-  const Eigen::Matrix4d G = volume_[e] * grad_N_[e] * tension * grad_N_[e].transpose();
-  for (int a = 0; a < 4; ++a)
-    for (int b = 0; b < 4; ++b) K.block<3, 3>(3 * a, 3 * b).diagonal().array() += G(a, b);
 }
 
 Eigen::Matrix3d CorotationalTetra::corotated_strain(int e, const Eigen::VectorXd& x) const {

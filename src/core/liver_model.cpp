@@ -524,7 +524,7 @@ void LiverModel::assemble_system() {
     Matrix12d Ke;
 #pragma omp for schedule(static) nowait
     for (int e = 0; e < tetra_.size(); ++e) {
-      tetra_.element_tangent(e, rotations_at_, Ke);
+      tetra_.element_tangent(e, Ke);
       scatter_add(Ke, &tet_map_[144 * e], kt);
     }
     if (capsule_.enabled) {
@@ -532,7 +532,7 @@ void LiverModel::assemble_system() {
 #pragma omp for schedule(static) nowait
       for (int i = 0; i < active; ++i) {
         const int t = capsule_active_[i];
-        membrane_.element_tangent(t, rotations_at_, Km);
+        membrane_.element_tangent(t, Km);
         scatter_add(Km, &tri_map_[81 * t], kt);
       }
     }
@@ -680,19 +680,19 @@ void LiverModel::newton(StepResult& result) {
       break;
     }
     ++result.iterations;
-    // Rayleigh damping uses the stiffness of the last tangent assembled at the start of a step,
-    // fixed within the step, so that the residual stays one function of x while Newton
-    // iterates. (v = 0 there, so the residual already computed is unchanged.) A step that
-    // reuses the factor keeps the damping of the step that made it: no assembly per frame.
-    const bool damping_snapshot = result.iterations - iterations_before == 1 &&
-                                  solver_.mode == SolverOptions::Mode::Dynamic && solver_.rayleigh_stiffness > 0;
+    // Rayleigh damping uses the stiffness at the start of the step, fixed within the step, so
+    // that the residual stays one function of x while Newton iterates. (v = 0 there, so the
+    // residual already computed is unchanged.) Damping with the tangent of an older step, to
+    // save the assembly, made the aspiration tube's dynamics take 10x the Newton iterations.
+    const bool damping_snapshot = result.iterations == 1 && solver_.mode == SolverOptions::Mode::Dynamic &&
+                                  solver_.rayleigh_stiffness > 0;
     using Strategy = SolverOptions::Strategy;
     const Strategy strategy = contacts_.empty() ? solver_.strategy : Strategy::NewtonKrylov;
     const bool current_tangent = strategy == Strategy::FullNewton || strategy == Strategy::FullNewtonEigen ||
                                  strategy == Strategy::ReusedFactorCG || strategy == Strategy::CG;
     if (strategy == Strategy::FullNewton) factor_valid_ = false;
     const bool uses_factor = strategy != Strategy::FullNewtonEigen && strategy != Strategy::CG;
-    if (!factor_valid_ || current_tangent) {
+    if (!factor_valid_ || current_tangent || damping_snapshot) {
       t0 = Clock::now();
       assemble_system();
       if (damping_snapshot) damping_stiffness_ = stiffness_;

@@ -1,6 +1,5 @@
 #include "liver_sim/membrane_cst.h"
 
-#include <Eigen/Eigenvalues>
 
 #include <Eigen/Geometry>
 #include <Eigen/LU>
@@ -54,9 +53,6 @@ void MembraneCST::set_material(const CapsuleOptions& material) {
   // Plane stress: sigma = lambda* tr(eps) I + 2 mu eps, lambda* = E nu / (1 - nu^2).
   const double lambda = E * nu / (1 - nu * nu);
   const double mu = E / (2 * (1 + nu));
-  lambda_ = lambda;
-  mu_ = mu;
-  thickness_ = h;
   K2_.resize(area_.size());
   for (size_t e = 0; e < area_.size(); ++e) {
     for (int a = 0; a < 3; ++a) {
@@ -107,23 +103,11 @@ double MembraneCST::element_force(int e, const Eigen::VectorXd& x, Vector9d& f) 
   return 0.5 * u.dot(f2);
 }
 
-void MembraneCST::element_tangent(int e, const Eigen::VectorXd& x, Matrix9d& K) const {
+void MembraneCST::element_tangent(int e, Matrix9d& K) const {
   const Eigen::Matrix<double, 3, 2>& A = frame_[e];
   for (int a = 0; a < 3; ++a)
     for (int b = 0; b < 3; ++b)
       K.block<3, 3>(3 * a, 3 * b).noalias() = A * K2_[e].block<2, 2>(2 * a, 2 * b) * A.transpose();
-  // Initial-stress stiffness h A (g_a . sigma g_b) I of the tensile in-plane stress: a taut
-  // capsule resists being pushed out of its plane (the in-plane stiffness alone does not).
-  const Eigen::Matrix2d strain = corotated_strain(e, x);
-  const Eigen::Matrix2d sigma = lambda_ * strain.trace() * Eigen::Matrix2d::Identity() + 2 * mu_ * strain;
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen;
-  eigen.computeDirect(sigma);
-  if (eigen.eigenvalues().maxCoeff() <= 0) return;
-  const Eigen::Matrix2d tension =
-      eigen.eigenvectors() * eigen.eigenvalues().cwiseMax(0.0).asDiagonal() * eigen.eigenvectors().transpose();
-  const Eigen::Matrix3d G = thickness_ * area_[e] * grad_N_[e] * tension * grad_N_[e].transpose();
-  for (int a = 0; a < 3; ++a)
-    for (int b = 0; b < 3; ++b) K.block<3, 3>(3 * a, 3 * b).diagonal().array() += G(a, b);
 }
 
 Eigen::Matrix2d MembraneCST::corotated_strain(int e, const Eigen::VectorXd& x) const {
