@@ -3,13 +3,14 @@
 #pragma once
 
 #include <Eigen/Core>
-#include <functional>
+
+#include "liver_sim/gmres.h"
 
 namespace liver_sim {
 
 class ConjugateGradient {
  public:
-  using Operator = std::function<void(const Eigen::VectorXd& in, Eigen::VectorXd& out)>;
+  using Operator = Gmres::Operator;  // y = A x, given as a product
 
   // Returns the iterations; stops when ||b - A x|| <= tolerance ||b|| or after max_iterations.
   // x starts from zero.

@@ -287,7 +287,7 @@ class LiverModel {
   std::vector<ContactUnknown> unknown_rows_;
   Eigen::MatrixXd schur_;
   Eigen::PartialPivLU<Eigen::MatrixXd> schur_lu_;
-  Eigen::VectorXd augmented_rhs_, augmented_solution_, augmented_dx_, augmented_out_, schur_rhs_;
+  Eigen::VectorXd augmented_rhs_, augmented_solution_, augmented_dx_, augmented_out_, schur_rhs_, schur_solution_;
   std::vector<char> fixed_dof_, fixed_next_;
   bool factor_valid_ = false;  // the factor preconditions the current constraint set and material
   CholmodSolver solver_cholmod_;

@@ -1078,12 +1078,12 @@ int LiverModel::contact_update(const std::function<void(const Eigen::VectorXd&, 
     schur_rhs_.resize(k);
     for (int a = 0; a < k; ++a)
       schur_rhs_[a] = in[dofs + a] - unknown_rows_[a].row.dot(augmented_out_.segment<3>(3 * contacts_[unknown_rows_[a].contact].node));
-    const Eigen::VectorXd lambda = schur_lu_.solve(schur_rhs_);
+    schur_solution_ = schur_lu_.solve(schur_rhs_);
     out.resize(dofs + k);
     for (int a = 0; a < k; ++a)
-      augmented_out_ += columns(contacts_[unknown_rows_[a].contact].node) * (unknown_rows_[a].force * lambda[a]);
+      augmented_out_ += columns(contacts_[unknown_rows_[a].contact].node) * (unknown_rows_[a].force * schur_solution_[a]);
     out.head(dofs) = augmented_out_;
-    out.tail(k) = lambda;
+    out.tail(k) = schur_solution_;
   };
   const int krylov = gmres_.solve(system, preconditioner, augmented_rhs_, augmented_solution_, forcing, kMaxKrylov);
   dx_ = augmented_solution_.head(dofs);

@@ -33,8 +33,11 @@
 #include <vector>
 
 #include "liver_sim/liver_model.h"
+#include "json_text.h"
 
 namespace {
+
+using liver_sim::json_string;
 
 using liver_sim::LiverModel;
 using liver_sim::Scene;
@@ -123,19 +126,6 @@ std::string parse_args(int argc, char** argv, Options* o) {
     return "--levels applies to --synthesize (the measurements carry their load levels)";
   }
   return "";
-}
-
-std::string json_string(const std::string& text) {
-  std::string out = "\"";
-  for (char c : text) {
-    if (c == '"' || c == '\\') out += '\\';
-    if (c == '\n') {
-      out += "\\n";
-      continue;
-    }
-    out += c;
-  }
-  return out + "\"";
 }
 
 std::string json_number(double x) {

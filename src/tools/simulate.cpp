@@ -14,9 +14,12 @@
 #include <vector>
 
 #include "liver_sim/liver_model.h"
+#include "json_text.h"
 #include "liver_sim/vtu_writer.h"
 
 namespace {
+
+using liver_sim::json_string;
 
 using liver_sim::LiverModel;
 using liver_sim::StepResult;
@@ -64,19 +67,6 @@ std::string json_vec(const Eigen::Vector3d& v) {
   std::ostringstream s;
   s << std::setprecision(9) << '[' << v[0] << ", " << v[1] << ", " << v[2] << ']';
   return s.str();
-}
-
-std::string json_string(const std::string& text) {
-  std::string out = "\"";
-  for (char c : text) {
-    if (c == '"' || c == '\\') out += '\\';
-    if (c == '\n') {
-      out += "\\n";
-      continue;
-    }
-    out += c;
-  }
-  return out + "\"";
 }
 
 const char* status_word(StepResult::Status s) {
