@@ -118,6 +118,24 @@ class LiverModel {
   // Force the supports exert on the tissue at the scene's fixed DOFs (N; 0 elsewhere).
   Eigen::VectorXd support_forces();
 
+  // Soft surface constraints (registration to a point cloud, registration.h): each target is a
+  // zero-length spring of stiffness k (N/m) between a point fixed in space and a point on a
+  // boundary triangle, given by barycentric weights (the triangle's nodes carry the force in
+  // those proportions). Potential 1/2 k |P (sum_j w_j x_j - p)|^2 with P = n n^T for a unit
+  // normal n (point-to-plane: the surface may slide along the plane) or P = I for n = 0
+  // (point-to-point). It enters the residual and the tangent, not the load scale. Replaces the
+  // previous set; throws std::invalid_argument for a triangle out of range or non-finite
+  // values. Acts at the next step; reset() removes the targets.
+  struct SurfaceTarget {
+    int triangle = -1;                                   // row of boundary()
+    Eigen::Vector3d weights = Eigen::Vector3d::Zero();   // barycentric, on the triangle's nodes
+    Eigen::Vector3d point = Eigen::Vector3d::Zero();     // m
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();    // unit (point-to-plane) or zero (point-to-point)
+    double stiffness = 0;                                // N/m, >= 0
+  };
+  void set_surface_targets(std::vector<SurfaceTarget> targets);
+  const std::vector<SurfaceTarget>& surface_targets() const { return surface_targets_; }
+
   // Back to the rest shape, zero velocity, time 0; parameters and instruments are kept (a
   // grasper lets go; it grasps again at the next step if it is still closed).
   void reset();
@@ -130,6 +148,10 @@ class LiverModel {
   double time() const { return time_; }
   int capsule_triangles() const;  // membrane triangles in use (0 when disabled)
   const SolverOptions& solver_options() const { return solver_; }
+  // Strategy, iteration cap, tolerance, line search, dt and damping, from the next step on (the
+  // same scene run fast or exact). The mode cannot change. Returns "" on success, else the
+  // validation message (nothing changed).
+  std::string set_solver_options(const SolverOptions& solver);
 
   // Vessels: beam nodes, beams (node pairs), the vessel each beam belongs to, current positions.
   int num_vessel_nodes() const { return static_cast<int>(vessel_nodes_.size()); }
@@ -142,6 +164,7 @@ class LiverModel {
   int num_probes() const { return static_cast<int>(probes_.size()); }
   const std::string& probe_name(int i) const { return probes_[i].name; }
   Eigen::Vector3d probe_displacement(int i) const;
+  Eigen::Vector3d probe_position(int i) const { return interpolate(x_, probes_[i].at); }
 
   // Internal elastic forces (tetrahedra + active membranes + beams) at state x; updates rotations.
   void internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f);
@@ -149,6 +172,8 @@ class LiverModel {
   double elastic_energy(const Eigen::VectorXd& x);
   // External forces at positions x (follower pressure on the current triangles), unscaled.
   void external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
+  // Adds the surface targets' spring forces at positions x to f.
+  void add_target_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
 
   // Overwrites the current state (tests start from a given configuration).
   void set_positions(const Eigen::VectorXd& x) {
@@ -298,6 +323,7 @@ class LiverModel {
   std::vector<NodalLoad> nodal_loads_;  // spread forces
   Eigen::Vector3d gravity_ = Eigen::Vector3d::Zero();  // m/s^2, acting on the lumped masses
   std::vector<Probe> probes_;
+  std::vector<SurfaceTarget> surface_targets_;
   std::vector<EmbeddedPoint> vessel_nodes_;
   std::optional<CorotationalBeams> beams_;
   std::vector<int> beam_vessel_;

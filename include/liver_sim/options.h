@@ -123,6 +123,26 @@ struct ContactOptions {
   int max_iterations = 1000;        // Gauss-Seidel sweeps per contact solve
 };
 
+// Non-rigid registration to intra-operative point clouds (registration.h). The cloud pulls the
+// boundary through springs between each accepted point and its closest point on the surface.
+struct RegistrationOptions {
+  enum class Metric {
+    PointToPlane,  // the spring acts along the surface normal at the closest point (slides freely)
+    PointToPoint   // isotropic spring to the closest point
+  };
+  double stiffness = 3e5;          // N/m: total of the springs, shared by the accepted points by weight
+  Metric metric = Metric::PointToPlane;
+  double voxel_size = 5e-3;        // m: voxel-grid downsampling of the cloud (0: none)
+  int max_points = 4000;           // points kept after downsampling (evenly strided beyond it)
+  double max_distance = 15e-3;     // m: points farther than this from the surface are outliers
+  double trim_fraction = 0.1;      // -, in [0, 0.9): the farthest fraction of the rest is dropped too
+  double huber_width = 2e-3;       // m: beyond this distance a point's weight falls as width/distance
+  int correspondence_updates = 3;  // closest points recomputed and solved this many times per cloud
+  int newton_iterations = 1;       // per update (a real-time frame: the next cloud continues)
+  SolverOptions::Strategy strategy = SolverOptions::Strategy::ModifiedNewton;  // of those iterations
+  bool rigid_alignment = false;    // PCL ICP of the first cloud to the surface, applied to all clouds
+};
+
 // Empty string when valid, else a message naming the field at fault.
 std::string validate(const ParenchymaOptions& o);
 std::string validate(const CapsuleOptions& o);
@@ -131,5 +151,6 @@ std::string validate(const Region& r);
 std::string validate(const VesselOptions& o);  // field names prefixed with "vessels.<name>."
 std::string validate(const InstrumentOptions& o);  // field names prefixed with "instruments.<name>."
 std::string validate(const ContactOptions& o);
+std::string validate(const RegistrationOptions& o);
 
 }  // namespace liver_sim

@@ -35,6 +35,7 @@ struct Scene {
   std::vector<VesselOptions> vessels;  // files resolved like the mesh file
   std::vector<InstrumentOptions> instruments;
   ContactOptions contact;
+  RegistrationOptions registration;
 };
 
 // Parses a scene file. `overrides` are "dotted.key=value" strings applied to the YAML tree

@@ -17,8 +17,8 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 constexpr int kMaxKrylov = 30;      // GMRES iterations per Newton step
-constexpr int kRefactorAfter = 10;
-constexpr int kMaxStages = 16;      // instrument stages per step  // GMRES iterations beyond which the factor is refreshed
+constexpr int kRefactorAfter = 10;  // GMRES iterations beyond which the factor is refreshed
+constexpr int kMaxStages = 16;      // instrument stages per step
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
@@ -333,6 +333,19 @@ std::string LiverModel::set_capsule(const CapsuleOptions& capsule) {
   return "";
 }
 
+std::string LiverModel::set_solver_options(const SolverOptions& solver) {
+  const std::string error = validate(solver);
+  if (!error.empty()) return error;
+  if (solver.mode != solver_.mode) return "solver.mode cannot change on a running model";
+  // The factored matrix depends on dt and the damping (dynamic mode); the strategy and the
+  // iteration controls leave it valid.
+  if (solver.dt != solver_.dt || solver.rayleigh_mass != solver_.rayleigh_mass ||
+      solver.rayleigh_stiffness != solver_.rayleigh_stiffness)
+    factor_valid_ = false;
+  solver_ = solver;
+  return "";
+}
+
 int LiverModel::capsule_triangles() const {
   return capsule_.enabled ? static_cast<int>(capsule_active_.size()) : 0;
 }
@@ -353,6 +366,7 @@ void LiverModel::reset() {
   v_.setZero();
   x_start_ = X_;
   time_ = 0;
+  surface_targets_.clear();
 }
 
 double LiverModel::max_displacement() const {
@@ -463,6 +477,12 @@ double LiverModel::work_over_step() {
   external_forces(x_start_, f_ext_);
   external_forces(x_, energy_work_);
   f_ext_ = 0.5 * load_scale_ * (f_ext_ + energy_work_) + contact_force_;
+  if (!surface_targets_.empty()) {
+    energy_work_.setZero();
+    add_target_forces(x_start_, energy_work_);
+    add_target_forces(x_, energy_work_);
+    f_ext_ += 0.5 * energy_work_;
+  }
   double work = 0;
   for (int i = 0; i < x_.size(); ++i)
     if (!fixed_dof_[i]) work += (x_[i] - x_start_[i]) * f_ext_[i];
@@ -489,10 +509,37 @@ void LiverModel::external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) c
     for (int i = 0; i < f.size(); i += 3) f.segment<3>(i) += mass_[i] * gravity_;
 }
 
+void LiverModel::set_surface_targets(std::vector<SurfaceTarget> targets) {
+  for (size_t i = 0; i < targets.size(); ++i) {
+    const SurfaceTarget& t = targets[i];
+    const std::string which = "surface target " + std::to_string(i);
+    if (t.triangle < 0 || t.triangle >= boundary_.rows())
+      throw std::invalid_argument(which + ": triangle " + std::to_string(t.triangle) + " is not a boundary triangle");
+    if (!t.weights.allFinite() || !t.point.allFinite() || !t.normal.allFinite() || !std::isfinite(t.stiffness) ||
+        t.stiffness < 0)
+      throw std::invalid_argument(which + ": weights, point, normal and stiffness must be finite, stiffness >= 0");
+    if (!t.normal.isZero(0.0) && std::abs(t.normal.norm() - 1) > 1e-9)
+      throw std::invalid_argument(which + ": the normal must be a unit vector or zero");
+  }
+  surface_targets_ = std::move(targets);
+  state_energy_ = std::numeric_limits<double>::quiet_NaN();
+}
+
+void LiverModel::add_target_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
+  for (const SurfaceTarget& t : surface_targets_) {
+    Eigen::Vector3d on_surface = -t.point;
+    for (int j = 0; j < 3; ++j) on_surface += t.weights[j] * x.segment<3>(3 * boundary_(t.triangle, j));
+    const Eigen::Vector3d pull =
+        -t.stiffness * (t.normal.isZero(0.0) ? on_surface : Eigen::Vector3d(t.normal * t.normal.dot(on_surface)));
+    for (int j = 0; j < 3; ++j) f.segment<3>(3 * boundary_(t.triangle, j)) += t.weights[j] * pull;
+  }
+}
+
 double LiverModel::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference, bool zero_fixed) {
   internal_forces(x, f_tmp_);
   external_forces(x, r);
   r *= load_scale_;
+  add_target_forces(x, r);
   const double load_norm = free_norm(r, fixed_dof_);
   // All DOFs: under prescribed displacements alone the reactions are the force scale.
   const double internal_norm = f_tmp_.norm();
@@ -554,6 +601,16 @@ void LiverModel::assemble_system() {
     m_scale = 1.0 / (dt * dt) + solver_.rayleigh_mass / dt;
   }
   for (size_t k = 0; k < stiffness_.size(); ++k) system_[k] = k_scale * stiffness_[k];
+  // The targets' springs: external, so undamped; k w w^T per triangle, isotropic.
+  Matrix9d Kt;
+  for (const SurfaceTarget& t : surface_targets_) {
+    const Eigen::Matrix3d ww = t.stiffness * t.weights * t.weights.transpose();
+    const Eigen::Matrix3d P =
+        t.normal.isZero(0.0) ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(t.normal * t.normal.transpose());
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) Kt.block<3, 3>(3 * a, 3 * b) = ww(a, b) * P;
+    scatter_add(Kt, &tri_map_[81 * t.triangle], system_);
+  }
   for (int i = 0; i < pattern_.rows(); ++i) {
     system_[pattern_.diagonal(i)] += m_scale * mass_[i];
     if (fixed_dof_[i]) system_[pattern_.diagonal(i)] = 1.0;

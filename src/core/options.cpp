@@ -106,6 +106,19 @@ std::string validate(const ContactOptions& o) {
                       o.max_iterations >= 1 ? "" : message("contact.max_iterations", ">= 1", o.max_iterations)});
 }
 
+std::string validate(const RegistrationOptions& o) {
+  return first_error(
+      {positive("registration.stiffness", o.stiffness), non_negative("registration.voxel_size", o.voxel_size),
+       o.max_points >= 1 ? "" : message("registration.max_points", ">= 1", o.max_points),
+       positive("registration.max_distance", o.max_distance),
+       std::isfinite(o.trim_fraction) && o.trim_fraction >= 0 && o.trim_fraction < 0.9
+           ? ""
+           : message("registration.trim_fraction", "in [0, 0.9)", o.trim_fraction),
+       positive("registration.huber_width", o.huber_width),
+       o.correspondence_updates >= 1 ? "" : message("registration.correspondence_updates", ">= 1", o.correspondence_updates),
+       o.newton_iterations >= 1 ? "" : message("registration.newton_iterations", ">= 1", o.newton_iterations)});
+}
+
 std::string validate(const Region& r) {
   if (!r.min.allFinite() || !r.max.allFinite() || !r.center.allFinite() || !r.normal.allFinite())
     return "region coordinates must be finite";

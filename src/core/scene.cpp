@@ -125,7 +125,7 @@ class Reader {
   Scene scene(const YAML::Node& root, const std::string& base_dir) const {
     if (!root.IsMap()) fail("", "expected a map of sections");
     check_keys(root, "", {"mesh", "parenchyma", "capsule", "fixed", "loads", "solver", "probes", "vessels",
-                          "instruments", "contact"});
+                          "instruments", "contact", "registration"});
     Scene s;
     read_mesh_source(required(root, "", "mesh"), base_dir, s.mesh);
     if (const YAML::Node p = root["parenchyma"]) {
@@ -186,14 +186,49 @@ class Reader {
       if (c["tolerance"]) s.contact.tolerance = number(c["tolerance"], "contact.tolerance");
       if (c["max_iterations"]) s.contact.max_iterations = integer(c["max_iterations"], "contact.max_iterations");
     }
+    if (const YAML::Node g = root["registration"]) read_registration(g, s.registration);
     require_valid(validate(s.parenchyma));
     require_valid(validate(s.capsule));
     require_valid(validate(s.solver));
     require_valid(validate(s.contact));
+    require_valid(validate(s.registration));
     return s;
   }
 
  private:
+  SolverOptions::Strategy strategy(const YAML::Node& n, const std::string& key) const {
+    using S = SolverOptions::Strategy;
+    const std::string w =
+        word(n, key, {"newton_krylov", "full_newton", "full_newton_eigen", "reused_factor_cg", "cg", "modified_newton"});
+    return w == "newton_krylov"       ? S::NewtonKrylov
+           : w == "full_newton"       ? S::FullNewton
+           : w == "full_newton_eigen" ? S::FullNewtonEigen
+           : w == "reused_factor_cg"  ? S::ReusedFactorCG
+           : w == "cg"                ? S::CG
+                                      : S::ModifiedNewton;
+  }
+
+  void read_registration(const YAML::Node& g, RegistrationOptions& o) const {
+    check_keys(g, "registration", {"stiffness", "metric", "voxel_size", "max_points", "max_distance", "trim_fraction",
+                                   "huber_width", "correspondence_updates", "newton_iterations", "strategy",
+                                   "rigid_alignment"});
+    if (g["strategy"]) o.strategy = strategy(g["strategy"], "registration.strategy");
+    if (g["newton_iterations"]) o.newton_iterations = integer(g["newton_iterations"], "registration.newton_iterations");
+    if (g["stiffness"]) o.stiffness = number(g["stiffness"], "registration.stiffness");
+    if (g["metric"])
+      o.metric = word(g["metric"], "registration.metric", {"point_to_plane", "point_to_point"}) == "point_to_plane"
+                     ? RegistrationOptions::Metric::PointToPlane
+                     : RegistrationOptions::Metric::PointToPoint;
+    if (g["voxel_size"]) o.voxel_size = number(g["voxel_size"], "registration.voxel_size");
+    if (g["max_points"]) o.max_points = integer(g["max_points"], "registration.max_points");
+    if (g["max_distance"]) o.max_distance = number(g["max_distance"], "registration.max_distance");
+    if (g["trim_fraction"]) o.trim_fraction = number(g["trim_fraction"], "registration.trim_fraction");
+    if (g["huber_width"]) o.huber_width = number(g["huber_width"], "registration.huber_width");
+    if (g["correspondence_updates"])
+      o.correspondence_updates = integer(g["correspondence_updates"], "registration.correspondence_updates");
+    if (g["rigid_alignment"]) o.rigid_alignment = boolean(g["rigid_alignment"], "registration.rigid_alignment");
+  }
+
   void read_mesh_source(const YAML::Node& m, const std::string& base_dir, MeshSource& out) const {
     check_keys(m, "mesh", {"file", "scale", "box"});
     if (static_cast<bool>(m["file"]) == static_cast<bool>(m["box"]))
@@ -340,17 +375,7 @@ class Reader {
   void read_solver(const YAML::Node& v, SolverOptions& o) const {
     check_keys(v, "solver", {"mode", "strategy", "dt", "steps", "max_iterations", "tolerance", "line_search",
                              "rayleigh_mass", "rayleigh_stiffness"});
-    if (v["strategy"]) {
-      using S = SolverOptions::Strategy;
-      const std::string w = word(v["strategy"], "solver.strategy",
-                                 {"newton_krylov", "full_newton", "full_newton_eigen", "reused_factor_cg", "cg", "modified_newton"});
-      o.strategy = w == "newton_krylov"       ? S::NewtonKrylov
-                   : w == "full_newton"       ? S::FullNewton
-                   : w == "full_newton_eigen" ? S::FullNewtonEigen
-                   : w == "reused_factor_cg"  ? S::ReusedFactorCG
-                   : w == "cg"                ? S::CG
-                                              : S::ModifiedNewton;
-    }
+    if (v["strategy"]) o.strategy = strategy(v["strategy"], "solver.strategy");
     if (v["mode"])
       o.mode = word(v["mode"], "solver.mode", {"static", "dynamic"}) == "static" ? SolverOptions::Mode::Static
                                                                                 : SolverOptions::Mode::Dynamic;

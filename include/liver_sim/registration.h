@@ -1,0 +1,151 @@
+// Physics-based registration of the liver model to intra-operative point clouds, ROS-free.
+//
+// Each frame: the cloud (model frame, m) is cropped to the model's neighbourhood, downsampled on
+// a voxel grid, optionally moved by a rigid alignment found once with PCL's ICP; then, a few
+// times, every point finds its closest point on the boundary triangles (a kd-tree over the
+// triangle centroids, then exact point-triangle distances), far points are rejected (distance
+// gate, then trimming), the rest are weighted (Huber), and they pull the surface through
+// springs (LiverModel::set_surface_targets) while the model solves its equilibrium, starting
+// from the last frame's state. The springs stay until the next cloud, so the model keeps the
+// registered shape; the elasticity carries the visible surface's motion to the hidden tumour
+// and vessels.
+#pragma once
+
+#include <pcl/kdtree/kdtree_flann.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "liver_sim/liver_model.h"
+
+namespace liver_sim {
+
+// A point of interest that moves with the tissue.
+struct TrackedTarget {
+  std::string name;
+  Eigen::Vector3d position;  // m, at the current state
+};
+// The scene's probes (the tumour) and the vessel nodes where three or more beams meet
+// (bifurcations, named "<vessel> bifurcation <node>"), at the model's current state.
+std::vector<TrackedTarget> tracked_targets(const LiverModel& model);
+
+// Closest points on a triangulated surface.
+class SurfaceLocator {
+ public:
+  struct Hit {
+    int triangle = -1;
+    Eigen::Vector3d weights = Eigen::Vector3d::Zero();  // barycentric of the closest point
+    Eigen::Vector3d point = Eigen::Vector3d::Zero();    // m
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();   // the triangle's outward unit normal
+    double distance = 0;                                // m
+  };
+  // The triangles `boundary` (rows: node indices into x, 3 per node) at positions x; with a
+  // viewpoint, only those whose front faces it (a camera sees no back face).
+  void build(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary,
+             const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
+  // Exact: the triangles of the nearest centroids are tested; when a triangle farther out could
+  // still be closer (its centroid within the best distance plus the largest centroid-to-vertex
+  // distance), every triangle within that radius is. Safe to call from several threads.
+  // With `candidates`, also returns the triangles tested (indices of this locator).
+  Hit closest(const Eigen::Vector3d& p, std::vector<int>* candidates = nullptr) const;
+  // The best of earlier candidates, at the positions of the last refresh (no tree search).
+  Hit closest_among(const Eigen::Vector3d& p, const std::vector<int>& candidates) const;
+  // The same triangles at new positions x (the tree keeps the old centroids: use closest_among).
+  void refresh(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary);
+  bool empty() const { return triangles_.empty(); }
+
+ private:
+  std::vector<int> triangles_;               // rows of the boundary kept
+  std::vector<Eigen::Matrix3d> corners_;     // columns: the triangle's vertices
+  double reach_ = 0;                         // largest centroid-to-vertex distance
+  pcl::PointCloud<pcl::PointXYZ>::Ptr centroids_;
+  pcl::KdTreeFLANN<pcl::PointXYZ> tree_;
+};
+
+// The closest point of triangle (a, b, c) to p: its barycentric weights.
+Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                    const Eigen::Vector3d& c);
+
+struct RegistrationFrame {
+  int input_points = 0;      // finite points received
+  int used_points = 0;       // after cropping, voxel grid and stride
+  int correspondences = 0;   // accepted (not gated, not trimmed) at the last update
+  int rejected = 0;          // gated or trimmed at the last update
+  double rms = 0;            // m: the accepted points' spring lengths after the solve (along the
+                             // normal for point-to-plane): their distance to the surface
+  double mean_weight = 0;    // Huber weight averaged over the accepted points
+  StepResult step;           // the last solve (its status: converged, capped or rolled back)
+  int newton_iterations = 0; // over all updates of this frame
+  int factorizations = 0;    // CHOLMOD factorisations, over all updates
+  double filter_ms = 0, correspondence_ms = 0, solve_ms = 0, total_ms = 0;
+};
+
+class SurfaceRegistration {
+ public:
+  // Throws std::invalid_argument for invalid options (validate(RegistrationOptions)).
+  SurfaceRegistration(LiverModel& model, const RegistrationOptions& options);
+
+  // Registers the model to a cloud in the model frame (m), seen from `viewpoint` (the sensor's
+  // origin in the model frame) when known. Non-finite points are dropped. Throws
+  // std::invalid_argument, with nothing changed, when no finite point remains or none lies
+  // within max_distance of the model's bounding box.
+  RegistrationFrame register_cloud(const pcl::PointCloud<pcl::PointXYZ>& cloud,
+                                   const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
+
+  // Removes the springs (the model relaxes at its next step) and forgets the rigid alignment.
+  void clear();
+  // The rigid alignment applied to every cloud (identity unless options.rigid_alignment).
+  const Eigen::Isometry3d& alignment() const { return alignment_; }
+  const RegistrationOptions& options() const { return options_; }
+  // The points of the last frame, after filtering and alignment (model frame, m).
+  const pcl::PointCloud<pcl::PointXYZ>& points() const { return *points_; }
+
+ private:
+  // Crops, downsamples and strides `cloud` into points_; returns the finite points received.
+  int filter(const pcl::PointCloud<pcl::PointXYZ>& cloud);
+  void align_rigidly();
+  // Correspondences at the model's current state into the model's targets; fills counts. The
+  // first update of a frame searches the tree; later ones, after the surface moved a little,
+  // test the triangles that search found near each point.
+  void update_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint, RegistrationFrame& frame);
+  double spring_rms() const;
+
+  LiverModel& model_;
+  RegistrationOptions options_;
+  Eigen::Isometry3d alignment_ = Eigen::Isometry3d::Identity();
+  bool aligned_ = false;
+  pcl::PointCloud<pcl::PointXYZ>::Ptr points_;
+  std::vector<int> accepted_;  // indices into points_ of the accepted points
+  SurfaceLocator locator_;
+  std::vector<SurfaceLocator::Hit> hits_;
+  std::vector<std::vector<int>> candidates_;  // per point: the triangles its frame's search tested
+  std::vector<std::pair<double, int>> ranked_;
+};
+
+// A synthetic intra-operative view, for benchmarks and tests: points sampled uniformly on the
+// boundary triangles at positions x, kept where the camera at `eye` sees them (front-facing,
+// not hidden: a depth buffer), then the `visible_fraction` of the whole surface area nearest to
+// the view axis (eye -> target), Gaussian noise of `noise` (m, per coordinate), and a share of
+// outliers spread uniformly over the box of the view's points grown by 2 cm.
+struct CameraView {
+  Eigen::Vector3d eye = Eigen::Vector3d::Zero();     // m
+  Eigen::Vector3d target = Eigen::Vector3d::Zero();  // m
+  double visible_fraction = 0.3;  // of the boundary area
+  double noise = 0.0;             // m
+  double outlier_fraction = 0.0;  // of the returned points
+  double spacing = 2e-3;          // m: mean distance between samples on the surface
+  unsigned seed = 1;
+};
+struct SyntheticCloud {
+  pcl::PointCloud<pcl::PointXYZ> cloud;
+  double visible_fraction = 0;  // achieved (below the request when the camera sees less)
+  int outliers = 0;
+};
+SyntheticCloud render_surface_cloud(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary, const CameraView& view);
+
+}  // namespace liver_sim

@@ -1,0 +1,435 @@
+#include "liver_sim/registration.h"
+
+#include <pcl/filters/voxel_grid.h>
+#include <pcl/registration/icp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <random>
+#include <stdexcept>
+
+namespace liver_sim {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
+
+bool finite(const pcl::PointXYZ& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
+
+}  // namespace
+
+std::vector<TrackedTarget> tracked_targets(const LiverModel& model) {
+  std::vector<TrackedTarget> targets;
+  for (int i = 0; i < model.num_probes(); ++i) targets.push_back({model.probe_name(i), model.probe_position(i)});
+  if (model.num_beams() == 0) return targets;
+  std::vector<int> degree(model.num_vessel_nodes(), 0), vessel(model.num_vessel_nodes(), 0);
+  const Eigen::MatrixX2i& segments = model.beam_segments();
+  for (int e = 0; e < segments.rows(); ++e)
+    for (int end = 0; end < 2; ++end) {
+      ++degree[segments(e, end)];
+      vessel[segments(e, end)] = model.beam_vessel(e);
+    }
+  for (int k = 0; k < model.num_vessel_nodes(); ++k)
+    if (degree[k] >= 3)
+      targets.push_back({model.vessel_name(vessel[k]) + " bifurcation " + std::to_string(k), model.vessel_node_position(k)});
+  return targets;
+}
+
+Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                    const Eigen::Vector3d& c) {
+  // Voronoi regions of the vertices, then the edges, else the face (Ericson, Real-Time
+  // Collision Detection, 5.1.5).
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return {1, 0, 0};
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return {0, 1, 0};
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    const double v = d1 / (d1 - d3);
+    return {1 - v, v, 0};
+  }
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return {0, 0, 1};
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    const double w = d2 / (d2 - d6);
+    return {1 - w, 0, w};
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return {0, 1 - w, w};
+  }
+  const double denominator = 1.0 / (va + vb + vc);
+  const double v = vb * denominator, w = vc * denominator;
+  return {1 - v - w, v, w};
+}
+
+void SurfaceLocator::build(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary,
+                           const std::optional<Eigen::Vector3d>& viewpoint) {
+  triangles_.clear();
+  corners_.clear();
+  reach_ = 0;
+  centroids_.reset(new pcl::PointCloud<pcl::PointXYZ>);
+  for (int t = 0; t < boundary.rows(); ++t) {
+    Eigen::Matrix3d v;
+    for (int j = 0; j < 3; ++j) v.col(j) = node(x, boundary(t, j));
+    const Eigen::Vector3d centroid = v.rowwise().mean();
+    if (viewpoint && (v.col(1) - v.col(0)).cross(v.col(2) - v.col(0)).dot(*viewpoint - centroid) <= 0) continue;
+    triangles_.push_back(t);
+    corners_.push_back(v);
+    for (int j = 0; j < 3; ++j) reach_ = std::max(reach_, (v.col(j) - centroid).norm());
+    centroids_->push_back(pcl::PointXYZ(centroid.x(), centroid.y(), centroid.z()));
+  }
+  if (!triangles_.empty()) tree_.setInputCloud(centroids_);
+}
+
+void SurfaceLocator::refresh(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary) {
+  for (size_t k = 0; k < triangles_.size(); ++k)
+    for (int j = 0; j < 3; ++j) corners_[k].col(j) = node(x, boundary(triangles_[k], j));
+}
+
+SurfaceLocator::Hit SurfaceLocator::closest_among(const Eigen::Vector3d& p, const std::vector<int>& candidates) const {
+  Hit best;
+  best.distance = std::numeric_limits<double>::infinity();
+  for (int k : candidates) {
+    const Eigen::Matrix3d& v = corners_[k];
+    const Eigen::Vector3d w = closest_on_triangle(p, v.col(0), v.col(1), v.col(2));
+    const Eigen::Vector3d c = v * w;
+    const double d = (p - c).norm();
+    if (d < best.distance) {
+      best.distance = d;
+      best.triangle = triangles_[k];
+      best.weights = w;
+      best.point = c;
+      best.normal = (v.col(1) - v.col(0)).cross(v.col(2) - v.col(0)).normalized();
+    }
+  }
+  return best;
+}
+
+SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, std::vector<int>* candidates) const {
+  std::vector<int> found;
+  std::vector<float> squared;
+  if (triangles_.empty()) return closest_among(p, found);
+  const pcl::PointXYZ q(p.x(), p.y(), p.z());
+  constexpr int kNearest = 8;
+  const int n = tree_.nearestKSearch(q, kNearest, found, squared);
+  Hit best = closest_among(p, found);
+  // Float centroids: a little slack keeps the bound safe.
+  const double bound = best.distance + reach_ + 1e-6;
+  if (n == kNearest && std::sqrt(squared.back()) < bound) {
+    tree_.radiusSearch(q, bound, found, squared);
+    best = closest_among(p, found);
+  }
+  if (candidates) candidates->swap(found);
+  return best;
+}
+
+SurfaceRegistration::SurfaceRegistration(LiverModel& model, const RegistrationOptions& options)
+    : model_(model), options_(options), points_(new pcl::PointCloud<pcl::PointXYZ>) {
+  const std::string error = validate(options);
+  if (!error.empty()) throw std::invalid_argument(error);
+}
+
+void SurfaceRegistration::clear() {
+  model_.set_surface_targets({});
+  alignment_ = Eigen::Isometry3d::Identity();
+  aligned_ = false;
+}
+
+int SurfaceRegistration::filter(const pcl::PointCloud<pcl::PointXYZ>& cloud) {
+  // Only points within max_distance of the model's box can correspond; cropping first also
+  // keeps the voxel grid's index range small (PCL gives up on a grid of over 2^31 voxels).
+  const Eigen::VectorXd& x = model_.positions();
+  Eigen::Vector3d low = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), high = -low;
+  for (int i = 0; i < x.size(); i += 3) {
+    low = low.cwiseMin(x.segment<3>(i));
+    high = high.cwiseMax(x.segment<3>(i));
+  }
+  low.array() -= options_.max_distance;
+  high.array() += options_.max_distance;
+  const Eigen::Isometry3d& T = alignment_;
+  auto cropped = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  cropped->reserve(cloud.size());
+  int finite_points = 0;
+  for (const pcl::PointXYZ& q : cloud) {
+    if (!finite(q)) continue;
+    ++finite_points;
+    const Eigen::Vector3d p = T * Eigen::Vector3d(q.x, q.y, q.z);
+    if ((p.array() >= low.array()).all() && (p.array() <= high.array()).all())
+      cropped->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  }
+  points_->clear();
+  if (options_.voxel_size > 0 && !cropped->empty()) {
+    pcl::VoxelGrid<pcl::PointXYZ> grid;
+    grid.setInputCloud(cropped);
+    const float leaf = static_cast<float>(options_.voxel_size);
+    grid.setLeafSize(leaf, leaf, leaf);
+    grid.filter(*points_);
+  } else {
+    points_->swap(*cropped);
+  }
+  if (static_cast<int>(points_->size()) > options_.max_points) {
+    const double stride = static_cast<double>(points_->size()) / options_.max_points;
+    pcl::PointCloud<pcl::PointXYZ> kept;
+    for (int i = 0; i < options_.max_points; ++i) kept.push_back((*points_)[static_cast<size_t>(i * stride)]);
+    points_->swap(kept);
+  }
+  return finite_points;
+}
+
+void SurfaceRegistration::align_rigidly() {
+  // Point-to-plane ICP against the boundary at the current state, sampled on a barycentric grid
+  // of about 2 mm with the triangles' normals: distances to the tangent planes are distances to
+  // the surface, where distances to the samples would bias the fit by the grid's spacing.
+  const Eigen::VectorXd& x = model_.positions();
+  const Eigen::MatrixX3i& F = model_.boundary();
+  auto surface = pcl::make_shared<pcl::PointCloud<pcl::PointNormal>>();
+  for (int t = 0; t < F.rows(); ++t) {
+    const Eigen::Vector3d a = node(x, F(t, 0)), b = node(x, F(t, 1)), c = node(x, F(t, 2));
+    const Eigen::Vector3d normal = (b - a).cross(c - a).normalized();
+    const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+    const int n = std::max(1, static_cast<int>(std::ceil(longest / 2e-3)));
+    for (int i = 0; i <= n; ++i)
+      for (int j = 0; i + j <= n; ++j) {
+        const Eigen::Vector3d p = a + (b - a) * (static_cast<double>(i) / n) + (c - a) * (static_cast<double>(j) / n);
+        pcl::PointNormal q;
+        q.getVector3fMap() = p.cast<float>();
+        q.getNormalVector3fMap() = normal.cast<float>();
+        surface->push_back(q);
+      }
+  }
+  auto source = pcl::make_shared<pcl::PointCloud<pcl::PointNormal>>();
+  for (const pcl::PointXYZ& p : *points_) {
+    pcl::PointNormal q;
+    q.getVector3fMap() = p.getVector3fMap();
+    q.getNormalVector3fMap().setZero();
+    source->push_back(q);
+  }
+  pcl::IterativeClosestPointWithNormals<pcl::PointNormal, pcl::PointNormal> icp;
+  icp.setInputSource(source);
+  icp.setInputTarget(surface);
+  icp.setMaxCorrespondenceDistance(5 * options_.max_distance);
+  icp.setMaximumIterations(200);
+  icp.setTransformationEpsilon(1e-14);
+  icp.setEuclideanFitnessEpsilon(0);
+  pcl::PointCloud<pcl::PointNormal> moved;
+  icp.align(moved);
+  if (!icp.hasConverged()) return;  // left unaligned; the next cloud tries again
+  const Eigen::Isometry3d step(icp.getFinalTransformation().cast<double>());
+  alignment_ = step * alignment_;
+  for (size_t i = 0; i < moved.size(); ++i) (*points_)[i].getVector3fMap() = moved[i].getVector3fMap();
+  aligned_ = true;
+}
+
+void SurfaceRegistration::update_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint,
+                                                 RegistrationFrame& frame) {
+  const int n = static_cast<int>(points_->size());
+  hits_.resize(n);
+  if (search) {
+    locator_.build(model_.positions(), model_.boundary(), viewpoint);
+    candidates_.resize(n);
+  } else {
+    locator_.refresh(model_.positions(), model_.boundary());
+  }
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    const pcl::PointXYZ& q = (*points_)[i];
+    const Eigen::Vector3d p(q.x, q.y, q.z);
+    hits_[i] = search ? locator_.closest(p, &candidates_[i]) : locator_.closest_among(p, candidates_[i]);
+  }
+  ranked_.clear();
+  for (int i = 0; i < n; ++i)
+    if (hits_[i].distance <= options_.max_distance) ranked_.emplace_back(hits_[i].distance, i);
+  // Trimmed: the farthest share of the gated points goes too (outliers near the surface).
+  std::sort(ranked_.begin(), ranked_.end());
+  ranked_.resize(ranked_.size() - static_cast<size_t>(options_.trim_fraction * ranked_.size()));
+  accepted_.clear();
+  double total_weight = 0;
+  for (const auto& [d, i] : ranked_) {
+    accepted_.push_back(i);
+    total_weight += d <= options_.huber_width ? 1.0 : options_.huber_width / d;
+  }
+  std::vector<LiverModel::SurfaceTarget> targets;
+  targets.reserve(accepted_.size());
+  for (int i : accepted_) {
+    const SurfaceLocator::Hit& h = hits_[i];
+    const double w = h.distance <= options_.huber_width ? 1.0 : options_.huber_width / h.distance;
+    LiverModel::SurfaceTarget t;
+    t.triangle = h.triangle;
+    t.weights = h.weights;
+    const pcl::PointXYZ& q = (*points_)[i];
+    t.point = Eigen::Vector3d(q.x, q.y, q.z);
+    if (options_.metric == RegistrationOptions::Metric::PointToPlane) t.normal = h.normal;
+    t.stiffness = options_.stiffness * w / total_weight;
+    targets.push_back(t);
+  }
+  model_.set_surface_targets(std::move(targets));
+  frame.correspondences = static_cast<int>(accepted_.size());
+  frame.rejected = n - frame.correspondences;
+  frame.mean_weight = accepted_.empty() ? 0.0 : total_weight / accepted_.size();
+}
+
+double SurfaceRegistration::spring_rms() const {
+  const std::vector<LiverModel::SurfaceTarget>& targets = model_.surface_targets();
+  if (targets.empty()) return 0.0;
+  const Eigen::VectorXd& x = model_.positions();
+  const Eigen::MatrixX3i& F = model_.boundary();
+  double sum = 0;
+  for (const LiverModel::SurfaceTarget& t : targets) {
+    Eigen::Vector3d gap = -t.point;
+    for (int j = 0; j < 3; ++j) gap += t.weights[j] * node(x, F(t.triangle, j));
+    sum += t.normal.isZero(0.0) ? gap.squaredNorm() : std::pow(t.normal.dot(gap), 2);
+  }
+  return std::sqrt(sum / targets.size());
+}
+
+RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl::PointXYZ>& cloud,
+                                                      const std::optional<Eigen::Vector3d>& viewpoint) {
+  const auto t_frame = Clock::now();
+  RegistrationFrame frame;
+  if (viewpoint && !viewpoint->allFinite()) throw std::invalid_argument("the viewpoint is not finite");
+  // The points of the previous frame stay in use if this cloud is refused.
+  pcl::PointCloud<pcl::PointXYZ>::Ptr previous(new pcl::PointCloud<pcl::PointXYZ>(*points_));
+  frame.input_points = filter(cloud);
+  if (points_->empty()) {
+    points_.swap(previous);
+    throw std::invalid_argument(frame.input_points == 0 ? "the cloud has no finite point"
+                                                        : "no point of the cloud lies near the model");
+  }
+  if (options_.rigid_alignment && !aligned_) align_rigidly();
+  frame.used_points = static_cast<int>(points_->size());
+  frame.filter_ms = ms_since(t_frame);
+  const std::optional<Eigen::Vector3d> eye = viewpoint ? std::optional<Eigen::Vector3d>(alignment_ * *viewpoint) : viewpoint;
+  for (int u = 0; u < options_.correspondence_updates; ++u) {
+    auto t0 = Clock::now();
+    update_correspondences(u == 0, eye, frame);
+    frame.correspondence_ms += ms_since(t0);
+    t0 = Clock::now();
+    const SolverOptions scene_solver = model_.solver_options();
+    SolverOptions frame_solver = scene_solver;
+    frame_solver.strategy = options_.strategy;
+    frame_solver.max_iterations = options_.newton_iterations;
+    model_.set_solver_options(frame_solver);  // valid: the scene's with validated values
+    frame.step = model_.step();
+    model_.set_solver_options(scene_solver);
+    frame.solve_ms += ms_since(t0);
+    frame.newton_iterations += frame.step.iterations;
+    frame.factorizations += frame.step.factorizations;
+    if (frame.step.status == StepResult::Status::Diverged) break;
+  }
+  frame.rms = spring_rms();
+  frame.total_ms = ms_since(t_frame);
+  return frame;
+}
+
+SyntheticCloud render_surface_cloud(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary, const CameraView& view) {
+  std::mt19937 rng(view.seed);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  // Camera frame: z along the view axis.
+  const Eigen::Vector3d axis = (view.target - view.eye).normalized();
+  const Eigen::Vector3d side = axis.unitOrthogonal(), up = axis.cross(side);
+  auto to_camera = [&](const Eigen::Vector3d& p) {
+    const Eigen::Vector3d d = p - view.eye;
+    return Eigen::Vector3d(d.dot(side), d.dot(up), d.dot(axis));
+  };
+  // Depth buffer over the front faces; the image spans the whole surface as seen from the eye.
+  double extent = 0;
+  for (int i = 0; i < x.size(); i += 3) {
+    const Eigen::Vector3d c = to_camera(x.segment<3>(i));
+    if (c.z() > 0) extent = std::max({extent, std::abs(c.x() / c.z()), std::abs(c.y() / c.z())});
+  }
+  const int size = 512;
+  const double scale = (size / 2 - 1) / std::max(extent, 1e-9);
+  std::vector<double> depth(size * size, std::numeric_limits<double>::infinity());
+  auto pixel = [&](const Eigen::Vector3d& c) {
+    return Eigen::Vector2d(size / 2 + scale * c.x() / c.z(), size / 2 + scale * c.y() / c.z());
+  };
+  std::vector<char> front(boundary.rows(), 0);
+  double total_area = 0;
+  std::vector<double> area(boundary.rows());
+  for (int t = 0; t < boundary.rows(); ++t) {
+    const Eigen::Vector3d a = node(x, boundary(t, 0)), b = node(x, boundary(t, 1)), c = node(x, boundary(t, 2));
+    const Eigen::Vector3d n = (b - a).cross(c - a);
+    area[t] = 0.5 * n.norm();
+    total_area += area[t];
+    Eigen::Vector3d cam[3] = {to_camera(a), to_camera(b), to_camera(c)};
+    if (n.dot(view.eye - a) <= 0 || cam[0].z() <= 0 || cam[1].z() <= 0 || cam[2].z() <= 0) continue;
+    front[t] = 1;
+    const Eigen::Vector2d p0 = pixel(cam[0]), p1 = pixel(cam[1]), p2 = pixel(cam[2]);
+    const int u_lo = std::max(0, static_cast<int>(std::floor(std::min({p0.x(), p1.x(), p2.x()}))));
+    const int u_hi = std::min(size - 1, static_cast<int>(std::ceil(std::max({p0.x(), p1.x(), p2.x()}))));
+    const int v_lo = std::max(0, static_cast<int>(std::floor(std::min({p0.y(), p1.y(), p2.y()}))));
+    const int v_hi = std::min(size - 1, static_cast<int>(std::ceil(std::max({p0.y(), p1.y(), p2.y()}))));
+    const double det = (p1 - p0).x() * (p2 - p0).y() - (p1 - p0).y() * (p2 - p0).x();
+    if (std::abs(det) < 1e-12) continue;
+    for (int v = v_lo; v <= v_hi; ++v)
+      for (int u = u_lo; u <= u_hi; ++u) {
+        const Eigen::Vector2d q(u + 0.5, v + 0.5);
+        const double l1 = ((q - p0).x() * (p2 - p0).y() - (q - p0).y() * (p2 - p0).x()) / det;
+        const double l2 = ((p1 - p0).x() * (q - p0).y() - (p1 - p0).y() * (q - p0).x()) / det;
+        if (l1 < 0 || l2 < 0 || l1 + l2 > 1) continue;
+        const double z = (1 - l1 - l2) * cam[0].z() + l1 * cam[1].z() + l2 * cam[2].z();
+        double& d = depth[v * size + u];
+        d = std::min(d, z);
+      }
+  }
+  // Uniform samples over the whole surface (their count measures area); the seen ones are kept.
+  const double per_sample = view.spacing * view.spacing;
+  std::vector<std::pair<double, Eigen::Vector3d>> seen;  // angle from the axis, point
+  long samples = 0;
+  for (int t = 0; t < boundary.rows(); ++t) {
+    const double expected = area[t] / per_sample;
+    const long count = static_cast<long>(expected) + (uniform(rng) < expected - std::floor(expected));
+    samples += count;
+    if (!front[t]) continue;
+    const Eigen::Vector3d a = node(x, boundary(t, 0)), b = node(x, boundary(t, 1)), c = node(x, boundary(t, 2));
+    for (long k = 0; k < count; ++k) {
+      const double r1 = std::sqrt(uniform(rng)), r2 = uniform(rng);
+      const Eigen::Vector3d p = (1 - r1) * a + r1 * (1 - r2) * b + r1 * r2 * c;
+      const Eigen::Vector3d cam = to_camera(p);
+      const Eigen::Vector2d q = pixel(cam);
+      const int u = std::clamp(static_cast<int>(q.x()), 0, size - 1), v = std::clamp(static_cast<int>(q.y()), 0, size - 1);
+      // Hidden when something lies in front by more than the depth a pixel spans here.
+      const double slack = 2.0 * cam.z() / scale + 1e-4;
+      if (cam.z() > depth[v * size + u] + slack) continue;
+      seen.emplace_back(std::acos(std::clamp(cam.normalized().z(), -1.0, 1.0)), p);
+    }
+  }
+  std::sort(seen.begin(), seen.end(), [](const auto& l, const auto& r) { return l.first < r.first; });
+  const size_t wanted = static_cast<size_t>(std::llround(view.visible_fraction * samples));
+  seen.resize(std::min(seen.size(), wanted));
+  SyntheticCloud out;
+  out.visible_fraction = samples > 0 ? static_cast<double>(seen.size()) / samples : 0.0;
+  Eigen::Vector3d low = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), high = -low;
+  for (const auto& s : seen) {
+    const Eigen::Vector3d p = s.second + view.noise * Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng));
+    low = low.cwiseMin(s.second);
+    high = high.cwiseMax(s.second);
+    out.cloud.push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  }
+  if (view.outlier_fraction > 0 && !seen.empty()) {
+    out.outliers = static_cast<int>(std::llround(view.outlier_fraction / (1 - view.outlier_fraction) * seen.size()));
+    low.array() -= 0.02;
+    high.array() += 0.02;
+    for (int k = 0; k < out.outliers; ++k) {
+      const Eigen::Vector3d p = low + (high - low).cwiseProduct(Eigen::Vector3d(uniform(rng), uniform(rng), uniform(rng)));
+      out.cloud.push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+    }
+  }
+  out.cloud.width = out.cloud.size();
+  out.cloud.height = 1;
+  return out;
+}
+
+}  // namespace liver_sim
