@@ -9,7 +9,8 @@ outliers is registered) for outlier fractions 0 and 20%, writes doc/registration
 then prints a Markdown table (TRE, surface error, time per frame).
 Pin it: taskset -c 0 /usr/bin/python3 scripts/registration_figures.py
   --quick   2 frames, one noise value and two visible fractions (the smoke run)
-  --bench PATH, --scene PATH, --out DIR (default doc/), --frames N (default 10)
+  --bench PATH, --scene PATH, --out DIR (default doc/), --frames N (default 10),
+  --repeats R (default 3: each case registered R times with other random clouds, averaged)
 """
 import argparse
 import csv
@@ -41,8 +42,9 @@ def fmt(values):
     return ",".join(f"{v:g}" for v in values)
 
 
-def run(bench, scene, frames, noise, visible):
-    cmd = [bench, "--scene", scene, "--frames", str(frames), "--noise", fmt(noise), "--visible", fmt(visible),
+def run(bench, scene, frames, repeats, noise, visible):
+    cmd = [bench, "--scene", scene, "--frames", str(frames), "--repeats", str(repeats), "--noise", fmt(noise),
+           "--visible", fmt(visible),
            "--outliers", fmt(OUTLIERS)]
     # stderr passes through: the ground truth alone takes ~15 s, its progress is worth seeing.
     res = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
@@ -102,16 +104,18 @@ def main():
     ap.add_argument("--scene", default=SCENE)
     ap.add_argument("--out", default=os.path.join(REPO, "doc"))
     ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
     if not os.access(args.bench, os.X_OK):
         sys.exit(f"registration_figures: {args.bench} not found or not executable: build first (scripts/run.sh)")
     frames = 2 if args.quick else args.frames
+    repeats = 1 if args.quick else args.repeats
 
     rows, by_sweep = [], {}
     for name, noise, visible in sweeps(args.quick):
         print(f"registration: sweep {name}: noise {fmt(1e3 * n for n in noise)} mm, visible {fmt(visible)}, "
               f"outliers {fmt(OUTLIERS)}, {frames} frames ...", file=sys.stderr, flush=True)
-        by_sweep[name] = run(args.bench, args.scene, frames, noise, visible)
+        by_sweep[name] = run(args.bench, args.scene, frames, repeats, noise, visible)
         rows += [{"sweep": name, **r} for r in by_sweep[name]]
     diverged = [r for r in rows if int(r["diverged"]) > 0]
     for r in diverged:

@@ -125,7 +125,8 @@ class LiverModel {
   // normal n (point-to-plane: the surface may slide along the plane) or P = I for n = 0
   // (point-to-point). It enters the residual and the tangent, not the load scale. Replaces the
   // previous set; throws std::invalid_argument for a triangle out of range or non-finite
-  // values. Acts at the next step; reset() removes the targets.
+  // values. Acts at the next step (refactorising when the total stiffness changed by over half);
+  // reset() removes the targets.
   struct SurfaceTarget {
     int triangle = -1;                                   // row of boundary()
     Eigen::Vector3d weights = Eigen::Vector3d::Zero();   // barycentric, on the triangle's nodes

@@ -71,6 +71,13 @@ class SurfaceLocator {
 Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
                                     const Eigen::Vector3d& c);
 
+// Cloud preparation, shared by register_cloud and the node's callback: points moved by
+// `transform` (into the model frame), the non-finite ones dropped, those outside `box` dropped,
+// then a voxel grid of `voxel` (m; 0: none; each voxel's points become their centroid) and an
+// even stride down to `max_points`. Returns the number of finite points received.
+int prepare_cloud(const pcl::PointCloud<pcl::PointXYZ>& in, const Eigen::Isometry3d& transform,
+                  const Eigen::AlignedBox3d& box, double voxel, int max_points, pcl::PointCloud<pcl::PointXYZ>& out);
+
 struct RegistrationFrame {
   int input_points = 0;      // finite points received
   int used_points = 0;       // after cropping, voxel grid and stride
@@ -106,7 +113,7 @@ class SurfaceRegistration {
   const pcl::PointCloud<pcl::PointXYZ>& points() const { return *points_; }
 
  private:
-  // Crops, downsamples and strides `cloud` into points_; returns the finite points received.
+  // prepare_cloud into points_: the alignment, the model's box grown by max_distance.
   int filter(const pcl::PointCloud<pcl::PointXYZ>& cloud);
   void align_rigidly();
   // Correspondences at the model's current state into the model's targets; fills counts. The

@@ -521,6 +521,12 @@ void LiverModel::set_surface_targets(std::vector<SurfaceTarget> targets) {
     if (!t.normal.isZero(0.0) && std::abs(t.normal.norm() - 1) > 1e-9)
       throw std::invalid_argument(which + ": the normal must be a unit vector or zero");
   }
+  // A factor without springs (or with far weaker ones) preconditions badly; frame-to-frame
+  // changes of the same cloud's springs keep it.
+  double total = 0, before = 0;
+  for (const SurfaceTarget& t : targets) total += t.stiffness;
+  for (const SurfaceTarget& t : surface_targets_) before += t.stiffness;
+  if (std::abs(total - before) > 0.5 * std::max(total, before)) factor_valid_ = false;
   surface_targets_ = std::move(targets);
   state_energy_ = std::numeric_limits<double>::quiet_NaN();
 }

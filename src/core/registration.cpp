@@ -146,45 +146,45 @@ void SurfaceRegistration::clear() {
   aligned_ = false;
 }
 
+int prepare_cloud(const pcl::PointCloud<pcl::PointXYZ>& in, const Eigen::Isometry3d& transform,
+                  const Eigen::AlignedBox3d& box, double voxel, int max_points, pcl::PointCloud<pcl::PointXYZ>& out) {
+  auto cropped = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  cropped->reserve(in.size());
+  int finite_points = 0;
+  for (const pcl::PointXYZ& q : in) {
+    if (!finite(q)) continue;
+    ++finite_points;
+    const Eigen::Vector3d p = transform * Eigen::Vector3d(q.x, q.y, q.z);
+    if (box.contains(p)) cropped->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  }
+  out.clear();
+  if (voxel > 0 && !cropped->empty()) {
+    pcl::VoxelGrid<pcl::PointXYZ> grid;
+    grid.setInputCloud(cropped);
+    const float leaf = static_cast<float>(voxel);
+    grid.setLeafSize(leaf, leaf, leaf);
+    grid.filter(out);
+  } else {
+    out.swap(*cropped);
+  }
+  if (static_cast<int>(out.size()) > max_points) {
+    const double stride = static_cast<double>(out.size()) / max_points;
+    pcl::PointCloud<pcl::PointXYZ> kept;
+    for (int i = 0; i < max_points; ++i) kept.push_back(out[static_cast<size_t>(i * stride)]);
+    out.swap(kept);
+  }
+  return finite_points;
+}
+
 int SurfaceRegistration::filter(const pcl::PointCloud<pcl::PointXYZ>& cloud) {
   // Only points within max_distance of the model's box can correspond; cropping first also
   // keeps the voxel grid's index range small (PCL gives up on a grid of over 2^31 voxels).
   const Eigen::VectorXd& x = model_.positions();
-  Eigen::Vector3d low = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), high = -low;
-  for (int i = 0; i < x.size(); i += 3) {
-    low = low.cwiseMin(x.segment<3>(i));
-    high = high.cwiseMax(x.segment<3>(i));
-  }
-  low.array() -= options_.max_distance;
-  high.array() += options_.max_distance;
-  const Eigen::Isometry3d& T = alignment_;
-  auto cropped = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
-  cropped->reserve(cloud.size());
-  int finite_points = 0;
-  for (const pcl::PointXYZ& q : cloud) {
-    if (!finite(q)) continue;
-    ++finite_points;
-    const Eigen::Vector3d p = T * Eigen::Vector3d(q.x, q.y, q.z);
-    if ((p.array() >= low.array()).all() && (p.array() <= high.array()).all())
-      cropped->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
-  }
-  points_->clear();
-  if (options_.voxel_size > 0 && !cropped->empty()) {
-    pcl::VoxelGrid<pcl::PointXYZ> grid;
-    grid.setInputCloud(cropped);
-    const float leaf = static_cast<float>(options_.voxel_size);
-    grid.setLeafSize(leaf, leaf, leaf);
-    grid.filter(*points_);
-  } else {
-    points_->swap(*cropped);
-  }
-  if (static_cast<int>(points_->size()) > options_.max_points) {
-    const double stride = static_cast<double>(points_->size()) / options_.max_points;
-    pcl::PointCloud<pcl::PointXYZ> kept;
-    for (int i = 0; i < options_.max_points; ++i) kept.push_back((*points_)[static_cast<size_t>(i * stride)]);
-    points_->swap(kept);
-  }
-  return finite_points;
+  Eigen::AlignedBox3d box;
+  for (int i = 0; i < x.size(); i += 3) box.extend(x.segment<3>(i));
+  box.min().array() -= options_.max_distance;
+  box.max().array() += options_.max_distance;
+  return prepare_cloud(cloud, alignment_, box, options_.voxel_size, options_.max_points, *points_);
 }
 
 void SurfaceRegistration::align_rigidly() {

@@ -2,6 +2,7 @@
 // store the latest input; the simulation loop (main thread) owns the model, steps it at ~rate
 // when there is something to do, and publishes.
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <geometry_msgs/PoseArray.h>
 #include <geometry_msgs/PoseStamped.h>
 #include <geometry_msgs/WrenchStamped.h>
 #include <pcl/point_cloud.h>
@@ -14,6 +15,7 @@
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 #include <visualization_msgs/Marker.h>
+#include <visualization_msgs/MarkerArray.h>
 
 #include <cmath>
 #include <deque>
@@ -26,6 +28,7 @@
 #include "liver_sim/SetCapsule.h"
 #include "liver_sim/SimulationStatus.h"
 #include "liver_sim/liver_model.h"
+#include "liver_sim/registration.h"
 #include "mesh_marker.h"
 
 namespace liver_sim {
@@ -48,6 +51,13 @@ bool finite(const geometry_msgs::Pose& p) {
   return std::isfinite(p.position.x) && std::isfinite(p.position.y) && std::isfinite(p.position.z) &&
          std::isfinite(p.orientation.x) && std::isfinite(p.orientation.y) && std::isfinite(p.orientation.z) &&
          std::isfinite(p.orientation.w);
+}
+
+Eigen::Isometry3d to_eigen(const geometry_msgs::Transform& t) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).normalized().toRotationMatrix();
+  T.translation() = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
+  return T;
 }
 
 }  // namespace
@@ -83,6 +93,14 @@ class LiverSimNode {
       throw std::invalid_argument(scene_path + ": " + e.what());
     }
     capsule_ = scene.capsule;
+    registration_ = std::make_unique<SurfaceRegistration>(*model_, scene.registration);
+    // Clouds are cropped in the callback to the rest shape's box grown by the registration's
+    // reach and ~cloud_margin for the liver's own motion.
+    pnh.param("cloud_margin", cloud_margin_, 0.05);
+    if (!(cloud_margin_ >= 0)) throw std::invalid_argument("~cloud_margin must be >= 0");
+    for (int i = 0; i < model_->positions().size(); i += 3) cloud_box_.extend(model_->positions().segment<3>(i));
+    cloud_box_.min().array() -= scene.registration.max_distance + cloud_margin_;
+    cloud_box_.max().array() += scene.registration.max_distance + cloud_margin_;
     // The instrument driven by instrument_pose / instrument_frames: out of the scene until its
     // first pose.
     InstrumentOptions probe;
@@ -101,6 +119,8 @@ class LiverSimNode {
     vessel_pub_ = pnh.advertise<visualization_msgs::Marker>("vessels", 1, true);
     status_pub_ = pnh.advertise<SimulationStatus>("status", 10);
     wrench_pub_ = pnh.advertise<geometry_msgs::WrenchStamped>("wrench", 10);
+    target_marker_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("targets", 1, true);
+    target_pose_pub_ = pnh.advertise<geometry_msgs::PoseArray>("target_poses", 1, true);
     pose_sub_ = nh.subscribe("instrument_pose", 1, &LiverSimNode::on_pose, this);
     command_sub_ = nh.subscribe("instrument_command", 10, &LiverSimNode::on_command, this);
     cloud_sub_ = nh.subscribe("points", 1, &LiverSimNode::on_cloud, this);
@@ -117,8 +137,9 @@ class LiverSimNode {
     bool must_step = true;  // the first step brings the scene's loads to equilibrium
     while (ros::ok()) {
       must_step |= apply_inputs();
-      if (must_step) {
-        const StepResult r = model_->step();
+      std::optional<RegistrationFrame> registered = register_pending_cloud();
+      if (registered || must_step) {
+        const StepResult r = registered ? registered->step : model_->step();
         ++steps_;
         last_ = r;
         // Continue next frame while iterating; a diverged step waits for new input.
@@ -153,7 +174,11 @@ class LiverSimNode {
     std::lock_guard<std::mutex> lock(mutex_);
     bool changed = false;
     if (reset_requested_) {
-      model_->reset();
+      model_->reset();  // also removes the registration's springs
+      registration_->clear();
+      clouds_registered_ = 0;
+      registration_rms_ = 0;
+      correspondences_ = 0;
       set_probe(std::nullopt);
       probe_centre_.reset();
       pose_changed_ = false;
@@ -261,30 +286,77 @@ class LiverSimNode {
     return xyz == 3 ? "" : "no float32 x, y, z fields";
   }
 
+  // Clouds are validated, moved into the model frame (tf2, at their stamp), cropped and
+  // downsampled here, off the simulation thread; the loop registers the latest one.
   void on_cloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    const ros::WallTime t0 = ros::WallTime::now();
     const std::string layout = cloud_layout_error(*msg);
     if (!layout.empty()) {
       std::lock_guard<std::mutex> lock(mutex_);
       return reject("points: " + layout);
     }
-    auto cloud = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+    Eigen::Isometry3d to_model = Eigen::Isometry3d::Identity();
+    if (!msg->header.frame_id.empty() && msg->header.frame_id != frame_id_) {
+      try {
+        to_model = to_eigen(
+            tf_buffer_.lookupTransform(frame_id_, msg->header.frame_id, msg->header.stamp, ros::Duration(0.1)).transform);
+      } catch (const tf2::TransformException& e) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return reject("points in frame '" + msg->header.frame_id + "': " + e.what());
+      }
+      if (!to_model.matrix().allFinite()) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return reject("points: non-finite transform from frame '" + msg->header.frame_id + "'");
+      }
+    }
+    pcl::PointCloud<pcl::PointXYZ> cloud;
     try {
-      pcl::fromROSMsg(*msg, *cloud);
+      pcl::fromROSMsg(*msg, cloud);
     } catch (const std::exception& e) {
       std::lock_guard<std::mutex> lock(mutex_);
       return reject(std::string("points: ") + e.what());
     }
-    size_t finite_points = 0;
-    for (const auto& p : cloud->points) finite_points += std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+    PendingCloud pending;
+    const RegistrationOptions& o = registration_->options();
+    const int finite_points = prepare_cloud(cloud, to_model, cloud_box_, o.voxel_size, o.max_points, pending.points);
+    pending.viewpoint = to_model.translation();  // the sensor's origin
+    pending.stamp = msg->header.stamp;
+    const double filter_s = (ros::WallTime::now() - t0).toSec();
     std::lock_guard<std::mutex> lock(mutex_);
+    last_cloud_filter_s_ = filter_s;
+    last_cloud_points_ = cloud.size();
     if (finite_points == 0) return reject("points: no finite point");
-    latest_cloud_ = std::move(cloud);  // kept for registration; replaced, never queued
+    if (pending.points.empty()) return reject("points: no point near the model");
+    pending_cloud_ = std::move(pending);  // replaced, never queued: the latest cloud wins
     ++clouds_;
+  }
+
+  // Registers the latest cloud, if one came since the last call. (simulation thread)
+  std::optional<RegistrationFrame> register_pending_cloud() {
+    std::optional<PendingCloud> cloud;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      cloud.swap(pending_cloud_);
+    }
+    if (!cloud) return std::nullopt;
+    try {
+      const RegistrationFrame f = registration_->register_cloud(cloud->points, cloud->viewpoint);
+      ++clouds_registered_;
+      registration_rms_ = f.rms;
+      correspondences_ = f.correspondences;
+      reflected_stamp_ = cloud->stamp;
+      return f;
+    } catch (const std::invalid_argument& e) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      reject(std::string("points: ") + e.what());
+      return std::nullopt;
+    }
   }
 
   bool on_reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
     reset_requested_ = true;
+    pending_cloud_.reset();
     res.success = true;
     res.message = "back to the rest shape at the next step; instruments released until their next pose";
     return true;
@@ -320,6 +392,9 @@ class LiverSimNode {
     s.max_displacement = model_->max_displacement();
     s.active_contacts = r.contacts;
     s.state = state_;
+    s.registration_rms = registration_rms_;
+    s.correspondences = correspondences_;
+    s.clouds_registered = clouds_registered_;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       s.rejected_inputs = rejected_;
@@ -347,6 +422,7 @@ class LiverSimNode {
     marker_.id = 0;
     fill_mesh_marker(*model_, color_scale_max_, surface_alpha_, marker_);
     mesh_pub_.publish(marker_);
+    publish_targets(marker_.header);
     if (model_->num_beams() > 0) {
       vessel_marker_.header = marker_.header;
       vessel_marker_.ns = "vessels";
@@ -373,6 +449,38 @@ class LiverSimNode {
     instrument_pub_.publish(tip);
   }
 
+  // The tumour probes and vessel bifurcations where the model has them now: spheres (tumour
+  // red, bifurcations blue) and their poses (orientation: identity).
+  void publish_targets(const std_msgs::Header& header) {
+    const std::vector<TrackedTarget> targets = tracked_targets(*model_);
+    visualization_msgs::MarkerArray markers;
+    geometry_msgs::PoseArray poses;
+    poses.header = header;
+    for (size_t i = 0; i < targets.size(); ++i) {
+      visualization_msgs::Marker m;
+      m.header = header;
+      m.ns = "targets";
+      m.id = static_cast<int>(i);
+      m.type = visualization_msgs::Marker::SPHERE;
+      m.action = visualization_msgs::Marker::ADD;
+      m.pose.position.x = targets[i].position.x();
+      m.pose.position.y = targets[i].position.y();
+      m.pose.position.z = targets[i].position.z();
+      m.pose.orientation.w = 1;
+      const bool vessel = targets[i].name.find("bifurcation") != std::string::npos;
+      m.scale.x = m.scale.y = m.scale.z = vessel ? 0.004 : 0.003;
+      m.color.r = vessel ? 0.2f : 1.0f;
+      m.color.g = 0.2f;
+      m.color.b = vessel ? 1.0f : 0.2f;
+      m.color.a = 1.0f;
+      m.text = targets[i].name;
+      markers.markers.push_back(m);
+      poses.poses.push_back(m.pose);
+    }
+    target_marker_pub_.publish(markers);
+    target_pose_pub_.publish(poses);
+  }
+
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
     using diagnostic_msgs::DiagnosticStatus;
     const unsigned char level = state_ == "diverged" ? DiagnosticStatus::ERROR
@@ -386,6 +494,10 @@ class LiverSimNode {
     std::lock_guard<std::mutex> lock(mutex_);
     stat.add("rejected inputs", rejected_);
     stat.add("point clouds received", clouds_);
+    stat.add("point clouds registered", clouds_registered_);
+    stat.add("registration RMS (m)", registration_rms_);
+    stat.add("last cloud size", last_cloud_points_);
+    stat.add("last cloud filter time (s)", last_cloud_filter_s_);
     stat.add("last rejection", last_rejection_);
   }
 
@@ -397,7 +509,10 @@ class LiverSimNode {
   std::string frame_id_;
   double rate_, publish_rate_, probe_radius_, color_scale_max_, surface_alpha_;
   std::vector<std::string> instrument_frames_;
-  ros::Publisher mesh_pub_, instrument_pub_, vessel_pub_, status_pub_, wrench_pub_;
+  ros::Publisher mesh_pub_, instrument_pub_, vessel_pub_, status_pub_, wrench_pub_, target_marker_pub_, target_pose_pub_;
+  std::unique_ptr<SurfaceRegistration> registration_;
+  double cloud_margin_ = 0.05;  // m
+  Eigen::AlignedBox3d cloud_box_;  // model frame: where cloud points can matter
   ros::Subscriber pose_sub_, command_sub_, cloud_sub_;
   ros::ServiceServer reset_srv_, capsule_srv_;
   visualization_msgs::Marker marker_, vessel_marker_;
@@ -408,6 +523,9 @@ class LiverSimNode {
   std::string state_ = "idle";
   std::deque<ros::WallTime> frame_times_;
   ros::Time reflected_stamp_;
+  uint64_t clouds_registered_ = 0;
+  double registration_rms_ = 0;
+  int correspondences_ = 0;
 
   // Shared with callbacks, under mutex_.
   std::mutex mutex_;
@@ -416,7 +534,14 @@ class LiverSimNode {
   bool pose_changed_ = false, probe_removed_ = false, reset_requested_ = false;
   std::optional<CapsuleOptions> pending_capsule_;
   CapsuleOptions capsule_;  // as applied to the model
-  pcl::PointCloud<pcl::PointXYZ>::ConstPtr latest_cloud_;
+  struct PendingCloud {
+    pcl::PointCloud<pcl::PointXYZ> points;  // model frame, cropped and downsampled
+    Eigen::Vector3d viewpoint;              // the sensor's origin, model frame
+    ros::Time stamp;
+  };
+  std::optional<PendingCloud> pending_cloud_;
+  double last_cloud_filter_s_ = 0;
+  size_t last_cloud_points_ = 0;
   uint32_t rejected_ = 0;
   uint64_t clouds_ = 0;
   std::string last_rejection_;
