@@ -206,7 +206,9 @@ TEST_F(Node, MalformedInputIsRefusedAndCountedWhileTheNodeRuns) {
   truncated.data.clear();
   cloud_pub_.publish(truncated);
   ASSERT_TRUE(refused(4)) << "truncated cloud: " << status_.text;
-  // A valid cloud is taken and not counted as refused.
+  EXPECT_NEAR(status_.max_displacement, before.max_displacement, 1e-12) << "refused input changed the model";
+  EXPECT_EQ(status_.clouds_registered, before.clouds_registered);
+  // A valid cloud is registered and not counted as refused.
   sensor_msgs::PointCloud2 cloud;
   cloud.header.frame_id = "liver";
   sensor_msgs::PointCloud2Modifier mod(cloud);
@@ -215,10 +217,10 @@ TEST_F(Node, MalformedInputIsRefusedAndCountedWhileTheNodeRuns) {
   sensor_msgs::PointCloud2Iterator<float> x(cloud, "x");
   for (int i = 0; i < 10; ++i, ++x) x[0] = x[1] = x[2] = 0.001f * i;
   cloud_pub_.publish(cloud);
+  ASSERT_TRUE(wait_for([&] { return status_.clouds_registered == before.clouds_registered + 1; }, 10.0)) << status_.text;
   const unsigned count = status_count_;
   ASSERT_TRUE(wait_for([&] { return status_count_ > count + 5; }, 10.0)) << "status stopped flowing";
   EXPECT_EQ(status_.rejected_inputs, before.rejected_inputs + 4);
-  EXPECT_NEAR(status_.max_displacement, before.max_displacement, 1e-12) << "refused input changed the model";
 }
 
 }  // namespace
