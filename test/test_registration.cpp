@@ -320,10 +320,17 @@ TEST(PhantomRegistration, RefusesCloudsWithNothingToRegisterAndKeepsItsState) {
   const float q = std::numeric_limits<float>::quiet_NaN();
   for (int i = 0; i < 100; ++i) nan.push_back(pcl::PointXYZ(q, q, q));
   for (int i = 0; i < 100; ++i) far.push_back(pcl::PointXYZ(5.0f, 5.0f, 5.0f + i));
+  pcl::PointCloud<pcl::PointXYZ> off_surface;  // inside the box's margin, beyond max_distance of the surface
+  const Eigen::Vector3d corner = p.mesh.V.colwise().maxCoeff().transpose();
+  for (int i = 0; i < 10; ++i) off_surface.push_back(pcl::PointXYZ(corner.x() + 0.012, corner.y() + 0.012, corner.z() + 0.012));
   EXPECT_THROW(registration.register_cloud(empty), std::invalid_argument);
   EXPECT_THROW(registration.register_cloud(nan), std::invalid_argument);
   EXPECT_THROW(registration.register_cloud(far), std::invalid_argument);
+  EXPECT_THROW(registration.register_cloud(off_surface), std::invalid_argument);
   EXPECT_THROW(registration.register_cloud(far, Eigen::Vector3d(q, 0, 0)), std::invalid_argument);
+  const pcl::PointCloud<pcl::PointXYZ> seen = render_surface_cloud(p.truth->positions(), p.model->boundary(), v).cloud;
+  EXPECT_THROW(registration.register_cloud(seen, Eigen::Vector3d(0.02, 0.0, 0.0)), std::invalid_argument)
+      << "a viewpoint inside the liver faces no triangle";
   EXPECT_EQ((p.model->positions() - state).norm(), 0.0);
   EXPECT_EQ(p.model->surface_targets().size(), springs);
   RegistrationOptions bad = p.scene.registration;

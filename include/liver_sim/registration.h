@@ -98,9 +98,10 @@ class SurfaceRegistration {
   SurfaceRegistration(LiverModel& model, const RegistrationOptions& options);
 
   // Registers the model to a cloud in the model frame (m), seen from `viewpoint` (the sensor's
-  // origin in the model frame) when known. Non-finite points are dropped. Throws
-  // std::invalid_argument, with nothing changed, when no finite point remains or none lies
-  // within max_distance of the model's bounding box.
+  // origin in the model frame) when known: then only triangles facing it correspond. Non-finite
+  // points are dropped. Throws std::invalid_argument, with nothing changed, when no finite point
+  // remains, none lies within max_distance of the model's bounding box or of its surface, or no
+  // triangle faces the viewpoint.
   RegistrationFrame register_cloud(const pcl::PointCloud<pcl::PointXYZ>& cloud,
                                    const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
 

@@ -310,10 +310,23 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   frame.used_points = static_cast<int>(points_->size());
   frame.filter_ms = ms_since(t_frame);
   const std::optional<Eigen::Vector3d> eye = viewpoint ? std::optional<Eigen::Vector3d>(alignment_ * *viewpoint) : viewpoint;
+  if (eye) {
+    locator_.build(model_.positions(), model_.boundary(), eye);
+    if (locator_.empty()) {
+      points_.swap(previous);
+      throw std::invalid_argument("no surface triangle faces the viewpoint (a sensor inside the liver?)");
+    }
+  }
+  const std::vector<LiverModel::SurfaceTarget> previous_targets = model_.surface_targets();
   for (int u = 0; u < options_.correspondence_updates; ++u) {
     auto t0 = Clock::now();
     update_correspondences(u == 0, eye, frame);
     frame.correspondence_ms += ms_since(t0);
+    if (frame.correspondences == 0) {  // all outliers: the last registration stands
+      model_.set_surface_targets(previous_targets);
+      points_.swap(previous);
+      throw std::invalid_argument("no point of the cloud lies within max_distance of the surface");
+    }
     t0 = Clock::now();
     const SolverOptions scene_solver = model_.solver_options();
     SolverOptions frame_solver = scene_solver;

@@ -319,7 +319,9 @@ class LiverSimNode {
     PendingCloud pending;
     const RegistrationOptions& o = registration_->options();
     const int finite_points = prepare_cloud(cloud, to_model, cloud_box_, o.voxel_size, o.max_points, pending.points);
-    pending.viewpoint = to_model.translation();  // the sensor's origin
+    // A cloud in a sensor's frame is seen from that frame's origin; one already in the model
+    // frame says nothing about where the sensor is.
+    if (!msg->header.frame_id.empty() && msg->header.frame_id != frame_id_) pending.viewpoint = to_model.translation();
     pending.stamp = msg->header.stamp;
     const double filter_s = (ros::WallTime::now() - t0).toSec();
     std::lock_guard<std::mutex> lock(mutex_);
@@ -536,7 +538,7 @@ class LiverSimNode {
   CapsuleOptions capsule_;  // as applied to the model
   struct PendingCloud {
     pcl::PointCloud<pcl::PointXYZ> points;  // model frame, cropped and downsampled
-    Eigen::Vector3d viewpoint;              // the sensor's origin, model frame
+    std::optional<Eigen::Vector3d> viewpoint;  // the sensor's origin, model frame, when known
     ros::Time stamp;
   };
   std::optional<PendingCloud> pending_cloud_;
