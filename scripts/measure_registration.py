@@ -85,8 +85,8 @@ def main():
     registered = last.clouds_registered - first.clouds_registered
     lat = np.array([(arrived[s] - s * 1e-9) * 1e3 for s in sent if s in arrived])
 
-    # A 1M-point cloud: the same patch, sampled 12x denser.
-    dense = surface_samples(state["mesh"], 0.17e-3, rng)
+    # A 1M-point cloud: the same patch, sampled 13x denser.
+    dense = surface_samples(state["mesh"], 0.15e-3, rng)
     pub.publish(point_cloud2.create_cloud_xyz32(Header(frame_id="liver", stamp=rospy.Time.now()), dense.astype(np.float32)))
     n0 = last.clouds_registered
     end = time.time() + 30

@@ -105,6 +105,12 @@ class SurfaceRegistration {
   RegistrationFrame register_cloud(const pcl::PointCloud<pcl::PointXYZ>& cloud,
                                    const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
 
+  // One more solve with the last cloud's springs and the registration's solver settings: the
+  // node converges the model on the last cloud between clouds, in steps short enough that the
+  // next cloud waits for one iteration. (The springs stay put: correspondences that switch
+  // triangles would keep the residual from reaching the tolerance.)
+  RegistrationFrame refine();
+
   // Removes the springs (the model relaxes at its next step) and forgets the rigid alignment.
   void clear();
   // The rigid alignment applied to every cloud (identity unless options.rigid_alignment).
@@ -122,6 +128,8 @@ class SurfaceRegistration {
   // test the triangles that search found near each point.
   void update_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint, RegistrationFrame& frame);
   double spring_rms() const;
+  // One model step with the registration's strategy and iteration cap; adds to the frame.
+  void solve(RegistrationFrame& frame);
 
   LiverModel& model_;
   RegistrationOptions options_;

@@ -144,6 +144,7 @@ void SurfaceRegistration::clear() {
   model_.set_surface_targets({});
   alignment_ = Eigen::Isometry3d::Identity();
   aligned_ = false;
+  points_->clear();
 }
 
 int prepare_cloud(const pcl::PointCloud<pcl::PointXYZ>& in, const Eigen::Isometry3d& transform,
@@ -319,7 +320,7 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   }
   const std::vector<LiverModel::SurfaceTarget> previous_targets = model_.surface_targets();
   for (int u = 0; u < options_.correspondence_updates; ++u) {
-    auto t0 = Clock::now();
+    const auto t0 = Clock::now();
     update_correspondences(u == 0, eye, frame);
     frame.correspondence_ms += ms_since(t0);
     if (frame.correspondences == 0) {  // all outliers: the last registration stands
@@ -327,19 +328,34 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
       points_.swap(previous);
       throw std::invalid_argument("no point of the cloud lies within max_distance of the surface");
     }
-    t0 = Clock::now();
-    const SolverOptions scene_solver = model_.solver_options();
-    SolverOptions frame_solver = scene_solver;
-    frame_solver.strategy = options_.strategy;
-    frame_solver.max_iterations = options_.newton_iterations;
-    model_.set_solver_options(frame_solver);  // valid: the scene's with validated values
-    frame.step = model_.step();
-    model_.set_solver_options(scene_solver);
-    frame.solve_ms += ms_since(t0);
-    frame.newton_iterations += frame.step.iterations;
-    frame.factorizations += frame.step.factorizations;
+    solve(frame);
     if (frame.step.status == StepResult::Status::Diverged) break;
   }
+  frame.rms = spring_rms();
+  frame.total_ms = ms_since(t_frame);
+  return frame;
+}
+
+void SurfaceRegistration::solve(RegistrationFrame& frame) {
+  const auto t0 = Clock::now();
+  const SolverOptions scene_solver = model_.solver_options();
+  SolverOptions frame_solver = scene_solver;
+  frame_solver.strategy = options_.strategy;
+  frame_solver.max_iterations = options_.newton_iterations;
+  model_.set_solver_options(frame_solver);  // valid: the scene's with validated values
+  frame.step = model_.step();
+  model_.set_solver_options(scene_solver);
+  frame.solve_ms += ms_since(t0);
+  frame.newton_iterations += frame.step.iterations;
+  frame.factorizations += frame.step.factorizations;
+}
+
+RegistrationFrame SurfaceRegistration::refine() {
+  const auto t_frame = Clock::now();
+  RegistrationFrame frame;
+  frame.used_points = static_cast<int>(points_->size());
+  frame.correspondences = static_cast<int>(model_.surface_targets().size());
+  solve(frame);
   frame.rms = spring_rms();
   frame.total_ms = ms_since(t_frame);
   return frame;

@@ -138,8 +138,21 @@ class LiverSimNode {
     while (ros::ok()) {
       must_step |= apply_inputs();
       std::optional<RegistrationFrame> registered = register_pending_cloud();
+      if (registered) registering_ = true;
       if (registered || must_step) {
-        const StepResult r = registered ? registered->step : model_->step();
+        // While clouds come, the model converges on the last one in the registration's short
+        // steps, so that the next cloud waits for one iteration, not a full solve.
+        StepResult r;
+        if (registered) {
+          r = registered->step;
+        } else if (registering_) {
+          const RegistrationFrame f = registration_->refine();
+          registration_rms_ = f.rms;
+          r = f.step;
+        } else {
+          r = model_->step();
+        }
+        if (r.status != StepResult::Status::NotConverged) registering_ = false;
         ++steps_;
         last_ = r;
         // Continue next frame while iterating; a diverged step waits for new input.
@@ -176,6 +189,7 @@ class LiverSimNode {
     if (reset_requested_) {
       model_->reset();  // also removes the registration's springs
       registration_->clear();
+      registering_ = false;
       clouds_registered_ = 0;
       registration_rms_ = 0;
       correspondences_ = 0;
@@ -526,6 +540,7 @@ class LiverSimNode {
   std::deque<ros::WallTime> frame_times_;
   ros::Time reflected_stamp_;
   uint64_t clouds_registered_ = 0;
+  bool registering_ = false;  // the model is converging on the last cloud
   double registration_rms_ = 0;
   int correspondences_ = 0;
 
