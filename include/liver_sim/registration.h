@@ -111,6 +111,10 @@ class SurfaceRegistration {
   // triangles would keep the residual from reaching the tolerance.)
   RegistrationFrame refine();
 
+  // The next cloud is rigidly aligned first (ICP from the current alignment), whatever
+  // options.rigid_alignment says: a camera moved or was recalibrated.
+  void request_rigid_alignment() { align_requested_ = true; }
+
   // Removes the springs (the model relaxes at its next step) and forgets the rigid alignment.
   void clear();
   // The rigid alignment applied to every cloud (identity unless options.rigid_alignment).
@@ -135,6 +139,7 @@ class SurfaceRegistration {
   RegistrationOptions options_;
   Eigen::Isometry3d alignment_ = Eigen::Isometry3d::Identity();
   bool aligned_ = false;
+  bool align_requested_ = false;
   pcl::PointCloud<pcl::PointXYZ>::Ptr points_;
   std::vector<int> accepted_;  // indices into points_ of the accepted points
   SurfaceLocator locator_;

@@ -230,6 +230,7 @@ void SurfaceRegistration::align_rigidly() {
   alignment_ = step * alignment_;
   for (size_t i = 0; i < moved.size(); ++i) (*points_)[i].getVector3fMap() = moved[i].getVector3fMap();
   aligned_ = true;
+  align_requested_ = false;
 }
 
 void SurfaceRegistration::update_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint,
@@ -307,7 +308,7 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
     throw std::invalid_argument(frame.input_points == 0 ? "the cloud has no finite point"
                                                         : "no point of the cloud lies near the model");
   }
-  if (options_.rigid_alignment && !aligned_) align_rigidly();
+  if ((options_.rigid_alignment && !aligned_) || align_requested_) align_rigidly();
   frame.used_points = static_cast<int>(points_->size());
   frame.filter_ms = ms_since(t_frame);
   const std::optional<Eigen::Vector3d> eye = viewpoint ? std::optional<Eigen::Vector3d>(alignment_ * *viewpoint) : viewpoint;
@@ -344,6 +345,13 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
   frame_solver.max_iterations = options_.newton_iterations;
   model_.set_solver_options(frame_solver);  // valid: the scene's with validated values
   frame.step = model_.step();
+  // An iteration on a factor from before the springs moved may not descend; the step is then
+  // rolled back as stalled and the factor marked stale. Once more, on a fresh factor.
+  if (frame.step.status == StepResult::Status::Diverged && frame.step.message.rfind("stalled", 0) == 0) {
+    frame.newton_iterations += frame.step.iterations;
+    frame.factorizations += frame.step.factorizations;
+    frame.step = model_.step();
+  }
   model_.set_solver_options(scene_solver);
   frame.solve_ms += ms_since(t0);
   frame.newton_iterations += frame.step.iterations;

@@ -126,6 +126,7 @@ class LiverSimNode {
     cloud_sub_ = nh.subscribe("points", 1, &LiverSimNode::on_cloud, this);
     reset_srv_ = pnh.advertiseService("reset", &LiverSimNode::on_reset, this);
     capsule_srv_ = pnh.advertiseService("set_capsule", &LiverSimNode::on_set_capsule, this);
+    align_srv_ = pnh.advertiseService("align_rigidly", &LiverSimNode::on_align_rigidly, this);
     updater_.setHardwareID("liver_sim");
     updater_.add("liver model", this, &LiverSimNode::diagnose);
   }
@@ -353,6 +354,10 @@ class LiverSimNode {
     {
       std::lock_guard<std::mutex> lock(mutex_);
       cloud.swap(pending_cloud_);
+      if (cloud && align_requested_) {
+        registration_->request_rigid_alignment();
+        align_requested_ = false;
+      }
     }
     if (!cloud) return std::nullopt;
     try {
@@ -375,6 +380,14 @@ class LiverSimNode {
     pending_cloud_.reset();
     res.success = true;
     res.message = "back to the rest shape at the next step; instruments released until their next pose";
+    return true;
+  }
+
+  bool on_align_rigidly(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    align_requested_ = true;
+    res.success = true;
+    res.message = "the next cloud is rigidly aligned (ICP) before it is registered";
     return true;
   }
 
@@ -530,7 +543,7 @@ class LiverSimNode {
   double cloud_margin_ = 0.05;  // m
   Eigen::AlignedBox3d cloud_box_;  // model frame: where cloud points can matter
   ros::Subscriber pose_sub_, command_sub_, cloud_sub_;
-  ros::ServiceServer reset_srv_, capsule_srv_;
+  ros::ServiceServer reset_srv_, capsule_srv_, align_srv_;
   visualization_msgs::Marker marker_, vessel_marker_;
 
   // Simulation thread only.
@@ -548,7 +561,7 @@ class LiverSimNode {
   std::mutex mutex_;
   std::optional<Eigen::Vector3d> probe_centre_;
   ros::Time pose_stamp_;
-  bool pose_changed_ = false, probe_removed_ = false, reset_requested_ = false;
+  bool pose_changed_ = false, probe_removed_ = false, reset_requested_ = false, align_requested_ = false;
   std::optional<CapsuleOptions> pending_capsule_;
   CapsuleOptions capsule_;  // as applied to the model
   struct PendingCloud {
