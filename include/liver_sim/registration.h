@@ -82,10 +82,8 @@ struct RegistrationFrame {
   int input_points = 0;      // finite points received
   int used_points = 0;       // after cropping, voxel grid and stride
   int correspondences = 0;   // accepted (not gated, not trimmed) at the last update
-  int rejected = 0;          // gated or trimmed at the last update
   double rms = 0;            // m: the accepted points' spring lengths after the solve (along the
                              // normal for point-to-plane): their distance to the surface
-  double mean_weight = 0;    // Huber weight averaged over the accepted points
   StepResult step;           // the last solve (its status: converged, capped or rolled back)
   int newton_iterations = 0; // over all updates of this frame
   int factorizations = 0;    // CHOLMOD factorisations, over all updates
@@ -141,7 +139,7 @@ class SurfaceRegistration {
   bool aligned_ = false;
   bool align_requested_ = false;
   pcl::PointCloud<pcl::PointXYZ>::Ptr points_;
-  std::vector<int> accepted_;  // indices into points_ of the accepted points
+  std::vector<int> accepted_;  // indices into points_ of the accepted points (kept: no allocation per update)
   SurfaceLocator locator_;
   std::vector<SurfaceLocator::Hit> hits_;
   std::vector<std::vector<int>> candidates_;  // per point: the triangles its frame's search tested

@@ -255,30 +255,28 @@ void SurfaceRegistration::update_correspondences(bool search, const std::optiona
   // Trimmed: the farthest share of the gated points goes too (outliers near the surface).
   std::sort(ranked_.begin(), ranked_.end());
   ranked_.resize(ranked_.size() - static_cast<size_t>(options_.trim_fraction * ranked_.size()));
+  auto huber = [&](double d) { return d <= options_.huber_width ? 1.0 : options_.huber_width / d; };
   accepted_.clear();
   double total_weight = 0;
   for (const auto& [d, i] : ranked_) {
     accepted_.push_back(i);
-    total_weight += d <= options_.huber_width ? 1.0 : options_.huber_width / d;
+    total_weight += huber(d);
   }
   std::vector<LiverModel::SurfaceTarget> targets;
   targets.reserve(accepted_.size());
   for (int i : accepted_) {
     const SurfaceLocator::Hit& h = hits_[i];
-    const double w = h.distance <= options_.huber_width ? 1.0 : options_.huber_width / h.distance;
     LiverModel::SurfaceTarget t;
     t.triangle = h.triangle;
     t.weights = h.weights;
     const pcl::PointXYZ& q = (*points_)[i];
     t.point = Eigen::Vector3d(q.x, q.y, q.z);
     if (options_.metric == RegistrationOptions::Metric::PointToPlane) t.normal = h.normal;
-    t.stiffness = options_.stiffness * w / total_weight;
+    t.stiffness = options_.stiffness * huber(h.distance) / total_weight;
     targets.push_back(t);
   }
   model_.set_surface_targets(std::move(targets));
   frame.correspondences = static_cast<int>(accepted_.size());
-  frame.rejected = n - frame.correspondences;
-  frame.mean_weight = accepted_.empty() ? 0.0 : total_weight / accepted_.size();
 }
 
 double SurfaceRegistration::spring_rms() const {
