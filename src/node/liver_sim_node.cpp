@@ -479,7 +479,9 @@ class LiverSimNode {
   }
 
   // The tumour probes and vessel bifurcations where the model has them now: spheres (tumour
-  // red, bifurcations blue) and their poses (orientation: identity).
+  // red, bifurcations blue; namespace "probes" or "bifurcations", id = the target's index, as in
+  // the poses) and their poses (orientation: identity). rviz flags text on a sphere, so the
+  // names are not in the markers (they are the scene's probe names, then the bifurcations).
   void publish_targets(const std_msgs::Header& header) {
     const std::vector<TrackedTarget> targets = tracked_targets(*model_);
     visualization_msgs::MarkerArray markers;
@@ -488,7 +490,8 @@ class LiverSimNode {
     for (size_t i = 0; i < targets.size(); ++i) {
       visualization_msgs::Marker m;
       m.header = header;
-      m.ns = "targets";
+      const bool vessel = targets[i].name.find("bifurcation") != std::string::npos;
+      m.ns = vessel ? "bifurcations" : "probes";
       m.id = static_cast<int>(i);
       m.type = visualization_msgs::Marker::SPHERE;
       m.action = visualization_msgs::Marker::ADD;
@@ -496,13 +499,11 @@ class LiverSimNode {
       m.pose.position.y = targets[i].position.y();
       m.pose.position.z = targets[i].position.z();
       m.pose.orientation.w = 1;
-      const bool vessel = targets[i].name.find("bifurcation") != std::string::npos;
       m.scale.x = m.scale.y = m.scale.z = vessel ? 0.004 : 0.003;
       m.color.r = vessel ? 0.2f : 1.0f;
       m.color.g = 0.2f;
       m.color.b = vessel ? 1.0f : 0.2f;
       m.color.a = 1.0f;
-      m.text = targets[i].name;
       markers.markers.push_back(m);
       poses.poses.push_back(m.pose);
     }
