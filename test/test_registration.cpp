@@ -256,6 +256,8 @@ TEST(Targets, AreTheTumourProbesAndTheVesselBifurcations) {
   const std::vector<TrackedTarget> targets = tracked_targets(*p.model);
   ASSERT_GT(targets.size(), 7u);
   EXPECT_EQ(targets[0].name, "tumour_centre");
+  EXPECT_EQ(targets[6].kind, TrackedTarget::Kind::Probe);
+  EXPECT_EQ(targets[7].kind, TrackedTarget::Kind::Bifurcation);
   EXPECT_NE(targets[7].name.find("bifurcation"), std::string::npos);
 }
 
@@ -343,13 +345,14 @@ TEST(PhantomRegistration, RefusesCloudsWithNothingToRegisterAndKeepsItsState) {
   const CameraView v = p.view(1e-3, 0.0, 3);
   registration.register_cloud(render_surface_cloud(p.truth->positions(), p.model->boundary(), v).cloud, v.eye);
   const Eigen::VectorXd state = p.model->positions();
-  const size_t springs = p.model->surface_targets().size();
+  const size_t springs = p.model->surface_targets().size(), points = registration.points().size();
   pcl::PointCloud<pcl::PointXYZ> empty, nan, far;
   const float q = std::numeric_limits<float>::quiet_NaN();
   for (int i = 0; i < 100; ++i) nan.push_back(pcl::PointXYZ(q, q, q));
   for (int i = 0; i < 100; ++i) far.push_back(pcl::PointXYZ(5.0f, 5.0f, 5.0f + i));
   pcl::PointCloud<pcl::PointXYZ> off_surface;  // inside the box's margin, beyond max_distance of the surface
-  const Eigen::Vector3d corner = p.mesh.V.colwise().maxCoeff().transpose();
+  Eigen::Vector3d corner = p.model->positions().segment<3>(0);  // of the box of the current shape
+  for (int i = 0; i < p.model->positions().size(); i += 3) corner = corner.cwiseMax(p.model->positions().segment<3>(i));
   for (int i = 0; i < 10; ++i) off_surface.push_back(pcl::PointXYZ(corner.x() + 0.012, corner.y() + 0.012, corner.z() + 0.012));
   EXPECT_THROW(registration.register_cloud(empty), std::invalid_argument);
   EXPECT_THROW(registration.register_cloud(nan), std::invalid_argument);
@@ -359,8 +362,19 @@ TEST(PhantomRegistration, RefusesCloudsWithNothingToRegisterAndKeepsItsState) {
   const pcl::PointCloud<pcl::PointXYZ> seen = render_surface_cloud(p.truth->positions(), p.model->boundary(), v).cloud;
   EXPECT_THROW(registration.register_cloud(seen, Eigen::Vector3d(0.02, 0.0, 0.0)), std::invalid_argument)
       << "a viewpoint inside the liver faces no triangle";
+  // A requested rigid alignment is not used up, nor its transform kept, by a refused cloud
+  // (ICP aligns this one, then no triangle faces its viewpoint).
+  registration.request_rigid_alignment();
+  EXPECT_THROW(registration.register_cloud(seen, Eigen::Vector3d(0.02, 0.0, 0.0)), std::invalid_argument);
+  EXPECT_TRUE(registration.alignment().isApprox(Eigen::Isometry3d::Identity()));
   EXPECT_EQ((p.model->positions() - state).norm(), 0.0);
   EXPECT_EQ(p.model->surface_targets().size(), springs);
+  EXPECT_EQ(registration.points().size(), points);
+  registration.register_cloud(seen, v.eye);  // the request still stands: this one is aligned
+  EXPECT_FALSE(registration.alignment().isApprox(Eigen::Isometry3d::Identity()));
+  registration.clear();
+  EXPECT_TRUE(registration.alignment().isApprox(Eigen::Isometry3d::Identity()));
+  EXPECT_TRUE(p.model->surface_targets().empty());
   RegistrationOptions bad = p.scene.registration;
   bad.trim_fraction = 0.95;
   EXPECT_THROW(SurfaceRegistration(*p.model, bad), std::invalid_argument);

@@ -137,6 +137,10 @@ class LiverModel {
   void set_surface_targets(std::vector<SurfaceTarget> targets);
   const std::vector<SurfaceTarget>& surface_targets() const { return surface_targets_; }
 
+  // The next Newton iteration factorises the matrix afresh (a retry after a step that stalled
+  // on an older factor).
+  void refactorize() { factor_valid_ = false; }
+
   // Back to the rest shape, zero velocity, time 0; parameters and instruments are kept (a
   // grasper lets go; it grasps again at the next step if it is still closed).
   void reset();

@@ -27,7 +27,9 @@ namespace liver_sim {
 
 // A point of interest that moves with the tissue.
 struct TrackedTarget {
+  enum class Kind { Probe, Bifurcation };
   std::string name;
+  Kind kind;
   Eigen::Vector3d position;  // m, at the current state
 };
 // The scene's probes (the tumour) and the vessel nodes where three or more beams meet
@@ -125,10 +127,10 @@ class SurfaceRegistration {
   // prepare_cloud into points_: the alignment, the model's box grown by max_distance.
   int filter(const pcl::PointCloud<pcl::PointXYZ>& cloud);
   void align_rigidly();
-  // Correspondences at the model's current state into the model's targets; fills counts. The
-  // first update of a frame searches the tree; later ones, after the surface moved a little,
-  // test the triangles that search found near each point.
-  void update_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint, RegistrationFrame& frame);
+  // Correspondences at the model's current state into targets_ (the model is not touched);
+  // returns their number. The first update of a frame searches the tree; later ones, after the
+  // surface moved a little, test the triangles that search found near each point.
+  int find_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint);
   double spring_rms() const;
   // One model step with the registration's strategy and iteration cap; adds to the frame.
   void solve(RegistrationFrame& frame);
@@ -139,7 +141,7 @@ class SurfaceRegistration {
   bool aligned_ = false;
   bool align_requested_ = false;
   pcl::PointCloud<pcl::PointXYZ>::Ptr points_;
-  std::vector<int> accepted_;  // indices into points_ of the accepted points (kept: no allocation per update)
+  std::vector<LiverModel::SurfaceTarget> targets_;  // of the last update
   SurfaceLocator locator_;
   std::vector<SurfaceLocator::Hit> hits_;
   std::vector<std::vector<int>> candidates_;  // per point: the triangles its frame's search tested

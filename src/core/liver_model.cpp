@@ -607,7 +607,8 @@ void LiverModel::assemble_system() {
     m_scale = 1.0 / (dt * dt) + solver_.rayleigh_mass / dt;
   }
   for (size_t k = 0; k < stiffness_.size(); ++k) system_[k] = k_scale * stiffness_[k];
-  // The targets' springs: external, so undamped; k w w^T per triangle, isotropic.
+  // The targets' springs: external, so undamped; k w w^T (x) P per triangle, P = n n^T
+  // (point-to-plane) or I.
   Matrix9d Kt;
   for (const SurfaceTarget& t : surface_targets_) {
     const Eigen::Matrix3d ww = t.stiffness * t.weights * t.weights.transpose();

@@ -25,7 +25,8 @@ bool finite(const pcl::PointXYZ& p) { return std::isfinite(p.x) && std::isfinite
 
 std::vector<TrackedTarget> tracked_targets(const LiverModel& model) {
   std::vector<TrackedTarget> targets;
-  for (int i = 0; i < model.num_probes(); ++i) targets.push_back({model.probe_name(i), model.probe_position(i)});
+  for (int i = 0; i < model.num_probes(); ++i)
+    targets.push_back({model.probe_name(i), TrackedTarget::Kind::Probe, model.probe_position(i)});
   if (model.num_beams() == 0) return targets;
   std::vector<int> degree(model.num_vessel_nodes(), 0), vessel(model.num_vessel_nodes(), 0);
   const Eigen::MatrixX2i& segments = model.beam_segments();
@@ -36,7 +37,8 @@ std::vector<TrackedTarget> tracked_targets(const LiverModel& model) {
     }
   for (int k = 0; k < model.num_vessel_nodes(); ++k)
     if (degree[k] >= 3)
-      targets.push_back({model.vessel_name(vessel[k]) + " bifurcation " + std::to_string(k), model.vessel_node_position(k)});
+      targets.push_back({model.vessel_name(vessel[k]) + " bifurcation " + std::to_string(k),
+                         TrackedTarget::Kind::Bifurcation, model.vessel_node_position(k)});
   return targets;
 }
 
@@ -233,8 +235,7 @@ void SurfaceRegistration::align_rigidly() {
   align_requested_ = false;
 }
 
-void SurfaceRegistration::update_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint,
-                                                 RegistrationFrame& frame) {
+int SurfaceRegistration::find_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint) {
   const int n = static_cast<int>(points_->size());
   hits_.resize(n);
   if (search) {
@@ -256,15 +257,10 @@ void SurfaceRegistration::update_correspondences(bool search, const std::optiona
   std::sort(ranked_.begin(), ranked_.end());
   ranked_.resize(ranked_.size() - static_cast<size_t>(options_.trim_fraction * ranked_.size()));
   auto huber = [&](double d) { return d <= options_.huber_width ? 1.0 : options_.huber_width / d; };
-  accepted_.clear();
   double total_weight = 0;
+  for (const auto& [d, i] : ranked_) total_weight += huber(d);
+  targets_.clear();
   for (const auto& [d, i] : ranked_) {
-    accepted_.push_back(i);
-    total_weight += huber(d);
-  }
-  std::vector<LiverModel::SurfaceTarget> targets;
-  targets.reserve(accepted_.size());
-  for (int i : accepted_) {
     const SurfaceLocator::Hit& h = hits_[i];
     LiverModel::SurfaceTarget t;
     t.triangle = h.triangle;
@@ -272,11 +268,10 @@ void SurfaceRegistration::update_correspondences(bool search, const std::optiona
     const pcl::PointXYZ& q = (*points_)[i];
     t.point = Eigen::Vector3d(q.x, q.y, q.z);
     if (options_.metric == RegistrationOptions::Metric::PointToPlane) t.normal = h.normal;
-    t.stiffness = options_.stiffness * huber(h.distance) / total_weight;
-    targets.push_back(t);
+    t.stiffness = options_.stiffness * huber(d) / total_weight;
+    targets_.push_back(t);
   }
-  model_.set_surface_targets(std::move(targets));
-  frame.correspondences = static_cast<int>(accepted_.size());
+  return static_cast<int>(targets_.size());
 }
 
 double SurfaceRegistration::spring_rms() const {
@@ -306,27 +301,30 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
     throw std::invalid_argument(frame.input_points == 0 ? "the cloud has no finite point"
                                                         : "no point of the cloud lies near the model");
   }
+  // Until the first springs are set, a refusal restores the points and the alignment.
+  const Eigen::Isometry3d previous_alignment = alignment_;
+  const bool was_aligned = aligned_, was_requested = align_requested_;
+  auto refuse = [&](const std::string& why) {
+    points_.swap(previous);
+    alignment_ = previous_alignment;
+    aligned_ = was_aligned;
+    align_requested_ = was_requested;
+    throw std::invalid_argument(why);
+  };
   if ((options_.rigid_alignment && !aligned_) || align_requested_) align_rigidly();
   frame.used_points = static_cast<int>(points_->size());
   frame.filter_ms = ms_since(t_frame);
   const std::optional<Eigen::Vector3d> eye = viewpoint ? std::optional<Eigen::Vector3d>(alignment_ * *viewpoint) : viewpoint;
-  if (eye) {
-    locator_.build(model_.positions(), model_.boundary(), eye);
-    if (locator_.empty()) {
-      points_.swap(previous);
-      throw std::invalid_argument("no surface triangle faces the viewpoint (a sensor inside the liver?)");
-    }
-  }
-  const std::vector<LiverModel::SurfaceTarget> previous_targets = model_.surface_targets();
   for (int u = 0; u < options_.correspondence_updates; ++u) {
     const auto t0 = Clock::now();
-    update_correspondences(u == 0, eye, frame);
+    const int found = find_correspondences(u == 0, eye);
     frame.correspondence_ms += ms_since(t0);
-    if (frame.correspondences == 0) {  // all outliers: the last registration stands
-      model_.set_surface_targets(previous_targets);
-      points_.swap(previous);
-      throw std::invalid_argument("no point of the cloud lies within max_distance of the surface");
-    }
+    if (found == 0 && u == 0)
+      refuse(locator_.empty() ? "no surface triangle faces the viewpoint (a sensor inside the liver?)"
+                              : "no point of the cloud lies within max_distance of the surface");
+    if (found == 0) break;  // the surface moved away from every point: the last springs stay
+    frame.correspondences = found;
+    model_.set_surface_targets(targets_);
     solve(frame);
     if (frame.step.status == StepResult::Status::Diverged) break;
   }
@@ -343,11 +341,12 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
   frame_solver.max_iterations = options_.newton_iterations;
   model_.set_solver_options(frame_solver);  // valid: the scene's with validated values
   frame.step = model_.step();
-  // An iteration on a factor from before the springs moved may not descend; the step is then
-  // rolled back as stalled and the factor marked stale. Once more, on a fresh factor.
-  if (frame.step.status == StepResult::Status::Diverged && frame.step.message.rfind("stalled", 0) == 0) {
+  // An iteration on a factor from before the springs moved may not descend, and the step is
+  // rolled back (stalled). Once more, on a fresh factor.
+  if (frame.step.status == StepResult::Status::Diverged) {
     frame.newton_iterations += frame.step.iterations;
     frame.factorizations += frame.step.factorizations;
+    model_.refactorize();
     frame.step = model_.step();
   }
   model_.set_solver_options(scene_solver);

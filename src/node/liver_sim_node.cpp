@@ -302,7 +302,8 @@ class LiverSimNode {
   }
 
   // Clouds are validated, moved into the model frame (tf2, at their stamp), cropped and
-  // downsampled here, off the simulation thread; the loop registers the latest one.
+  // downsampled here, off the simulation thread (a 1M cloud becomes a few thousand points); the
+  // loop registers the latest one (and crops it again, cheaply, to the model's current shape).
   void on_cloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     const ros::WallTime t0 = ros::WallTime::now();
     const std::string layout = cloud_layout_error(*msg);
@@ -362,10 +363,12 @@ class LiverSimNode {
     if (!cloud) return std::nullopt;
     try {
       const RegistrationFrame f = registration_->register_cloud(cloud->points, cloud->viewpoint);
-      ++clouds_registered_;
-      registration_rms_ = f.rms;
-      correspondences_ = f.correspondences;
-      reflected_stamp_ = cloud->stamp;
+      if (f.step.status != StepResult::Status::Diverged) {  // rolled back: the state is the last one
+        ++clouds_registered_;
+        registration_rms_ = f.rms;
+        correspondences_ = f.correspondences;
+        reflected_stamp_ = cloud->stamp;
+      }
       return f;
     } catch (const std::invalid_argument& e) {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -490,7 +493,7 @@ class LiverSimNode {
     for (size_t i = 0; i < targets.size(); ++i) {
       visualization_msgs::Marker m;
       m.header = header;
-      const bool vessel = targets[i].name.find("bifurcation") != std::string::npos;
+      const bool vessel = targets[i].kind == TrackedTarget::Kind::Bifurcation;
       m.ns = vessel ? "bifurcations" : "probes";
       m.id = static_cast<int>(i);
       m.type = visualization_msgs::Marker::SPHERE;

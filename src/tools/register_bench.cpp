@@ -171,7 +171,7 @@ int main(int argc, char** argv) {
     std::ostream& out = opt.csv.empty() ? std::cout : file;
     out << "noise_m,visible_request,visible_fraction,outlier_fraction,frames,cloud_points,used_points,"
            "correspondences,tre_unregistered_mean_mm,tre_unregistered_max_mm,tre_mean_mm,tre_max_mm,"
-           "tre_worst_frame_max_mm,surface_error_mm,surface_rms_mm,frame_median_ms,frame_max_ms,filter_ms,"
+           "tre_worst_frame_max_mm,surface_error_mm,spring_rms_mm,frame_median_ms,frame_max_ms,filter_ms,"
            "correspondence_ms,solve_ms,newton_per_frame,factorizations_per_frame,diverged,tumour_tre_mean_mm,"
            "worst_target\n";
     out << std::setprecision(6);
