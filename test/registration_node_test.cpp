@@ -28,11 +28,11 @@ geometry_msgs::PoseArray target_poses;
 visualization_msgs::MarkerArray target_markers;
 int status_count = 0, pose_count = 0, marker_count = 0;
 
-// The camera in the model frame: in front of the liver (anterior-superior), turned 90 degrees
-// about x, so that camera and model coordinates differ by a rotation and a translation.
-Eigen::Isometry3d camera_in_liver(const Eigen::Vector3d& centre) {
+// The camera in the model frame: at the synthetic view's eye, turned 90 degrees about x, so
+// that camera and model coordinates differ by a rotation and a translation.
+Eigen::Isometry3d camera_in_liver(const liver_sim::CameraView& view) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.translation() = centre + 0.25 * Eigen::Vector3d(0.0, -1.0, 0.6).normalized();
+  T.translation() = view.eye;
   T.linear() = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitX()).toRotationMatrix();
   return T;
 }
@@ -70,25 +70,14 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
   const liver_sim::TetMesh mesh = liver_sim::load_scene_mesh(scene);
   liver_sim::LiverModel rest(mesh, scene);
   ASSERT_TRUE(rest.step().converged());
-  const Eigen::Vector3d low = mesh.V.colwise().minCoeff().transpose(), high = mesh.V.colwise().maxCoeff().transpose();
-  liver_sim::LoadOptions lift;
-  lift.kind = liver_sim::LoadOptions::Kind::Force;
-  lift.vector = Eigen::Vector3d(0, 0, 5.0);
-  liver_sim::Region underside;
-  underside.kind = liver_sim::Region::Kind::Box;
-  underside.min = Eigen::Vector3d(low.x() + 0.6 * (high.x() - low.x()), low.y() - 1e-3, low.z() - 1e-3);
-  underside.max = Eigen::Vector3d(high.x() + 1e-3, high.y() + 1e-3, low.z() + 0.25 * (high.z() - low.z()));
-  lift.region = underside;
-  scene.loads.push_back(lift);
+  scene.loads.push_back(liver_sim::underside_lift(mesh, 5.0));
   liver_sim::LiverModel truth(mesh, scene);
   ASSERT_TRUE(truth.step().converged());
   const std::vector<liver_sim::TrackedTarget> before = liver_sim::tracked_targets(rest),
                                               expected = liver_sim::tracked_targets(truth);
 
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  for (int i = 0; i < rest.positions().size(); i += 3) centre += rest.positions().segment<3>(i);
-  centre /= rest.positions().size() / 3;
-  const Eigen::Isometry3d camera = camera_in_liver(centre);
+  liver_sim::CameraView view = liver_sim::front_view(rest.positions());
+  const Eigen::Isometry3d camera = camera_in_liver(view);
   // What tf says about the camera: off by 3 mm and 1 degree (a calibration error).
   const Eigen::Isometry3d calibrated =
       camera * Eigen::Translation3d(0.002, -0.002, 0.001) * Eigen::AngleAxisd(M_PI / 180, Eigen::Vector3d(1, 1, 0).normalized());
@@ -122,9 +111,6 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
   pcl::PointCloud<pcl::PointXYZ> nan_cloud;
   const float nan = std::numeric_limits<float>::quiet_NaN();
   for (int i = 0; i < 1000; ++i) nan_cloud.push_back(pcl::PointXYZ(nan, nan, nan));
-  liver_sim::CameraView view;
-  view.eye = camera.translation();
-  view.target = centre;
   view.noise = 1e-3;
   view.seed = 1;
   const pcl::PointCloud<pcl::PointXYZ> seen = liver_sim::render_surface_cloud(truth.positions(), truth.boundary(), view).cloud;

@@ -203,24 +203,13 @@ struct Phantom {
     model = std::make_unique<LiverModel>(mesh, scene);
     model->set_positions(preoperative);
     if (lift > 0) {
-      const Eigen::Vector3d low = mesh.V.colwise().minCoeff().transpose(), high = mesh.V.colwise().maxCoeff().transpose();
-      LoadOptions l;
-      l.kind = LoadOptions::Kind::Force;
-      l.vector = Eigen::Vector3d(0, 0, lift);
-      l.region = box({low.x() + 0.6 * (high.x() - low.x()), low.y() - 1e-3, low.z() - 1e-3},
-                     {high.x() + 1e-3, high.y() + 1e-3, low.z() + 0.25 * (high.z() - low.z())});
-      t.loads.push_back(l);
+      t.loads.push_back(underside_lift(mesh, lift));
       truth = std::make_unique<LiverModel>(mesh, t);
       EXPECT_TRUE(truth->step().converged());
     }
   }
   CameraView view(double noise, double outliers, unsigned seed) const {
-    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-    for (int i = 0; i < preoperative.size(); i += 3) centre += preoperative.segment<3>(i);
-    centre /= preoperative.size() / 3;
-    CameraView v;
-    v.eye = centre + 0.25 * Eigen::Vector3d(0.0, -1.0, 0.6).normalized();
-    v.target = centre;
+    CameraView v = front_view(preoperative);
     v.visible_fraction = 0.3;
     v.noise = noise;
     v.outlier_fraction = outliers;

@@ -140,7 +140,7 @@ class SurfaceRegistration {
   Eigen::Isometry3d alignment_ = Eigen::Isometry3d::Identity();
   bool aligned_ = false;
   bool align_requested_ = false;
-  pcl::PointCloud<pcl::PointXYZ>::Ptr points_;
+  pcl::PointCloud<pcl::PointXYZ>::Ptr points_, previous_points_;  // this frame's, the last accepted frame's while filtering
   std::vector<LiverModel::SurfaceTarget> targets_;  // of the last update
   SurfaceLocator locator_;
   std::vector<SurfaceLocator::Hit> hits_;
@@ -168,5 +168,12 @@ struct SyntheticCloud {
   int outliers = 0;
 };
 SyntheticCloud render_surface_cloud(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary, const CameraView& view);
+
+// The synthetic scenario of register_bench and the tests. A retractor lifting the liver:
+// `newtons` upward (+z), spread over the nodes of the mesh's underside (the lowest quarter in z)
+// in its last 40% along x (the phantom's right lobe).
+LoadOptions underside_lift(const TetMesh& mesh, double newtons);
+// A camera 25 cm from the centroid of positions x, anterior-superior (-y, +z), looking at it.
+CameraView front_view(const Eigen::VectorXd& x);
 
 }  // namespace liver_sim

@@ -137,7 +137,10 @@ SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, std::vecto
 }
 
 SurfaceRegistration::SurfaceRegistration(LiverModel& model, const RegistrationOptions& options)
-    : model_(model), options_(options), points_(new pcl::PointCloud<pcl::PointXYZ>) {
+    : model_(model),
+      options_(options),
+      points_(new pcl::PointCloud<pcl::PointXYZ>),
+      previous_points_(new pcl::PointCloud<pcl::PointXYZ>) {
   const std::string error = validate(options);
   if (!error.empty()) throw std::invalid_argument(error);
 }
@@ -293,11 +296,11 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   const auto t_frame = Clock::now();
   RegistrationFrame frame;
   if (viewpoint && !viewpoint->allFinite()) throw std::invalid_argument("the viewpoint is not finite");
-  // The points of the previous frame stay in use if this cloud is refused.
-  pcl::PointCloud<pcl::PointXYZ>::Ptr previous(new pcl::PointCloud<pcl::PointXYZ>(*points_));
+  // The points of the previous frame stay in use if this cloud is refused (swapped, not copied).
+  points_.swap(previous_points_);
   frame.input_points = filter(cloud);
   if (points_->empty()) {
-    points_.swap(previous);
+    points_.swap(previous_points_);
     throw std::invalid_argument(frame.input_points == 0 ? "the cloud has no finite point"
                                                         : "no point of the cloud lies near the model");
   }
@@ -305,7 +308,7 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   const Eigen::Isometry3d previous_alignment = alignment_;
   const bool was_aligned = aligned_, was_requested = align_requested_;
   auto refuse = [&](const std::string& why) {
-    points_.swap(previous);
+    points_.swap(previous_points_);
     alignment_ = previous_alignment;
     aligned_ = was_aligned;
     align_requested_ = was_requested;
@@ -324,7 +327,7 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
                               : "no point of the cloud lies within max_distance of the surface");
     if (found == 0) break;  // the surface moved away from every point: the last springs stay
     frame.correspondences = found;
-    model_.set_surface_targets(targets_);
+    model_.set_surface_targets(std::move(targets_));  // refilled at the next update
     solve(frame);
     if (frame.step.status == StepResult::Status::Diverged) break;
   }
@@ -464,6 +467,29 @@ SyntheticCloud render_surface_cloud(const Eigen::VectorXd& x, const Eigen::Matri
   out.cloud.width = out.cloud.size();
   out.cloud.height = 1;
   return out;
+}
+
+LoadOptions underside_lift(const TetMesh& mesh, double newtons) {
+  const Eigen::Vector3d low = mesh.V.colwise().minCoeff().transpose(), high = mesh.V.colwise().maxCoeff().transpose();
+  LoadOptions lift;
+  lift.kind = LoadOptions::Kind::Force;
+  lift.vector = Eigen::Vector3d(0, 0, newtons);
+  Region underside;
+  underside.kind = Region::Kind::Box;
+  underside.min = Eigen::Vector3d(low.x() + 0.6 * (high.x() - low.x()), low.y() - 1e-3, low.z() - 1e-3);
+  underside.max = Eigen::Vector3d(high.x() + 1e-3, high.y() + 1e-3, low.z() + 0.25 * (high.z() - low.z()));
+  lift.region = underside;
+  return lift;
+}
+
+CameraView front_view(const Eigen::VectorXd& x) {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (int i = 0; i < x.size(); i += 3) centre += x.segment<3>(i);
+  centre /= x.size() / 3;
+  CameraView view;
+  view.eye = centre + 0.25 * Eigen::Vector3d(0.0, -1.0, 0.6).normalized();
+  view.target = centre;
+  return view;
 }
 
 }  // namespace liver_sim

@@ -127,16 +127,6 @@ int main(int argc, char** argv) {
   try {
     Scene scene = load_scene(opt.scene, opt.overrides);
     const TetMesh mesh = load_scene_mesh(scene);
-    // The lift: upward (+z) on the boundary nodes of the right lobe's underside.
-    Eigen::Vector3d low = mesh.V.colwise().minCoeff().transpose(), high = mesh.V.colwise().maxCoeff().transpose();
-    LoadOptions lift;
-    lift.kind = LoadOptions::Kind::Force;
-    Region underside;
-    underside.kind = Region::Kind::Box;
-    underside.min = Eigen::Vector3d(low.x() + 0.6 * (high.x() - low.x()), low.y() - 1e-3, low.z() - 1e-3);
-    underside.max = Eigen::Vector3d(high.x() + 1e-3, high.y() + 1e-3, low.z() + 0.25 * (high.z() - low.z()));
-    lift.region = underside;
-
     // Ground truth frames: a model per lift value, each solved tightly from rest.
     std::vector<Eigen::VectorXd> truth;
     std::vector<std::vector<Eigen::Vector3d>> truth_targets;
@@ -144,9 +134,9 @@ int main(int argc, char** argv) {
     truth_scene.solver.mode = SolverOptions::Mode::Static;
     truth_scene.solver.tolerance = 1e-10;
     truth_scene.solver.max_iterations = 100;
-    truth_scene.loads.push_back(lift);
+    truth_scene.loads.push_back(underside_lift(mesh, 0.0));
     for (int k = 0; k <= opt.frames; ++k) {
-      truth_scene.loads.back().vector = Eigen::Vector3d(0, 0, opt.lift * k / opt.frames);
+      truth_scene.loads.back() = underside_lift(mesh, opt.lift * k / opt.frames);
       LiverModel m(mesh, truth_scene);
       const StepResult r = m.step();
       if (!r.converged()) throw std::runtime_error("ground truth frame " + std::to_string(k) + " did not converge: " + r.message);
@@ -162,9 +152,6 @@ int main(int argc, char** argv) {
     const std::vector<Eigen::Vector3d>& preoperative_targets = truth_targets[0];
     std::vector<std::string> names;
     for (const TrackedTarget& t : tracked_targets(model)) names.push_back(t.name);
-    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-    for (int i = 0; i < preoperative.size(); i += 3) centre += preoperative.segment<3>(i);
-    centre /= preoperative.size() / 3;
 
     std::ofstream file;
     if (!opt.csv.empty()) file.open(opt.csv);
@@ -180,9 +167,7 @@ int main(int argc, char** argv) {
     for (double noise : opt.noise)
       for (double visible : opt.visible)
         for (double outliers : opt.outliers) {
-          CameraView view;
-          view.eye = centre + 0.25 * Eigen::Vector3d(0.0, -1.0, 0.6).normalized();  // anterior-superior
-          view.target = centre;
+          CameraView view = front_view(preoperative);
           view.visible_fraction = visible;
           view.noise = noise;
           view.outlier_fraction = outliers;
