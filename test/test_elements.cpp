@@ -202,6 +202,78 @@ TEST_P(TetraRotation, TangentMatchesFiniteDifferencesAtRotatedRest) {
   EXPECT_LE((df - Kd).norm(), 1e-6 * Kd.norm());
 }
 
+// The polar iteration warm-started from a guess (the element's last rotation) against the
+// scaled iteration from F: the same rotation to round-off from near and far guesses, also for an
+// inverted element (where the SVD decides) and from a half turn away (where it must restart).
+TEST(PolarRotation, WarmStartMatchesTheScaledIterationFromAnyGuess) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1, 1);
+  int checked = 0;
+  for (double strain : {0.02, 0.2, 0.5}) {
+    for (int trial = 0; trial < 20; ++trial) {
+      Eigen::Matrix3d S;
+      for (int i = 0; i < 9; ++i) S(i / 3, i % 3) = u(rng);
+      S = (Eigen::Matrix3d::Identity() + 0.5 * strain * (S + S.transpose())).eval();
+      if (S.determinant() < 0.05) continue;
+      const Eigen::Matrix3d R_true = Eigen::AngleAxisd(3 * u(rng), Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized()).toRotationMatrix();
+      Eigen::Matrix3d F = R_true * S;
+      if (trial % 5 == 0) F.col(2) = -F.col(2) + 0.3 * F.col(0);  // inverted: det F < 0
+      const Eigen::Matrix3d expected = polar_rotation(F);
+      for (double angle : {1e-9, 1e-5, 1e-3, 0.3, 3.1}) {
+        const Eigen::Vector3d axis = Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized();
+        Eigen::Quaterniond q(expected * Eigen::AngleAxisd(angle, axis).toRotationMatrix());
+        const Eigen::Matrix3d R = polar_rotation(F, q);
+        ASSERT_LE((R - expected).cwiseAbs().maxCoeff(), 1e-13) << "strain " << strain << " guess " << angle << " rad away";
+        ASSERT_LE((R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff(), 1e-14);
+        ASSERT_LE((q.toRotationMatrix() - R).cwiseAbs().maxCoeff(), 1e-14);  // the guess follows
+        ++checked;
+      }
+    }
+  }
+  EXPECT_GT(checked, 200);
+}
+
+// The element force from the stress against R K0 (R^T x - X) with the rest stiffness, and the
+// energy against 1/2 u^T K0 u, at a large deformation.
+TEST_P(TetraRotation, ForceIsTheRestStiffnessOnTheCorotatedDisplacement) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(2, 2, 2));
+  CorotationalTetra tets(mesh.V, mesh.T, material(GetParam()));
+  const Eigen::VectorXd X = flatten(mesh.V);
+  const Eigen::VectorXd x = transform(X + random_field(X.size(), 0.05 * kSize, 5), some_rotation(), Eigen::Vector3d::Zero());
+  for (int e = 0; e < tets.size(); ++e) {
+    Vector12d f;
+    const double energy = tets.element_force(e, x, f);
+    const Eigen::Matrix3d& R = tets.rotation(e);
+    Vector12d u = Vector12d::Zero();
+    const auto node = [&](const Eigen::VectorXd& y, int k) { return y.segment<3>(3 * tets.elements()(e, k)); };
+    for (int k = 1; k < 4; ++k) u.segment<3>(3 * k) = R.transpose() * (node(x, k) - node(x, 0)) - (node(X, k) - node(X, 0));
+    const Vector12d local = tets.rest_stiffness(e) * u;
+    Vector12d expected;
+    for (int k = 0; k < 4; ++k) expected.segment<3>(3 * k) = R * local.segment<3>(3 * k);
+    ASSERT_LE((f - expected).norm(), 1e-12 * expected.norm()) << "element " << e;
+    ASSERT_NEAR(energy, 0.5 * u.dot(local), 1e-12 * u.dot(local)) << "element " << e;
+  }
+}
+
+// The matrix-free product (damping forces) against the element tangent times the vector.
+TEST(TetraStiffness, TangentProductMatchesTheTangent) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(2, 2, 2));
+  CorotationalTetra tets(mesh.V, mesh.T, material(RotationMethod::Polar));
+  const Eigen::VectorXd x = transform(flatten(mesh.V) + random_field(3 * mesh.V.rows(), 0.05 * kSize, 8), some_rotation(),
+                                      Eigen::Vector3d::Zero());
+  tets.update_rotations(x);
+  const Eigen::VectorXd v = random_field(x.size(), 1.0, 9);
+  for (int e = 0; e < tets.size(); ++e) {
+    Matrix12d K;
+    tets.element_tangent(e, K);
+    Vector12d ve, out;
+    for (int k = 0; k < 4; ++k) ve.segment<3>(3 * k) = v.segment<3>(3 * tets.elements()(e, k));
+    tets.tangent_product(e, tets.rotation(e), v, out);
+    const Vector12d expected = K * ve;
+    ASSERT_LE((out - expected).norm(), 1e-12 * expected.norm()) << "element " << e;
+  }
+}
+
 // --- CST membrane ---
 
 TEST(MembraneRotation, RigidMotionOfDeformedStateRotatesForces) {
@@ -320,6 +392,25 @@ TEST(MembraneRotation, ForcesDoNotDependOnVertexOrder) {
   const Eigen::VectorXd x = flatten(mesh.V) + random_field(3 * mesh.V.rows(), 0.1 * kSize, 5);
   const Eigen::VectorXd fa = membrane_forces(a, x), fb = membrane_forces(b, x);
   EXPECT_LE((fa - fb).norm(), 1e-9 * fa.norm());
+}
+
+// The membrane's matrix-free product against its tangent times the vector.
+TEST(MembraneStiffness, TangentProductMatchesTheTangent) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(2, 2, 2));
+  MembraneCST m(mesh.V, boundary_triangles(mesh.T), capsule());
+  const Eigen::VectorXd x = transform(flatten(mesh.V) + random_field(3 * mesh.V.rows(), 0.05 * kSize, 12), some_rotation(),
+                                      Eigen::Vector3d::Zero());
+  m.update_rotations(x);
+  const Eigen::VectorXd v = random_field(x.size(), 1.0, 13);
+  for (int e = 0; e < m.size(); ++e) {
+    Matrix9d K;
+    m.element_tangent(e, K);
+    Vector9d ve, out;
+    for (int k = 0; k < 3; ++k) ve.segment<3>(3 * k) = v.segment<3>(3 * m.triangles()(e, k));
+    m.tangent_product(e, m.frames()[e], v, out);
+    const Vector9d expected = K * ve;
+    ASSERT_LE((out - expected).norm(), 1e-12 * expected.norm()) << "triangle " << e;
+  }
 }
 
 }  // namespace

@@ -269,7 +269,18 @@ class LiverModel {
   int threads_ = 1;  // OpenMP threads for the element loops
   std::vector<Eigen::VectorXd> thread_forces_;            // per thread but the first
   std::vector<std::vector<double>> thread_stiffness_;
-  std::vector<double> damping_stiffness_;  // K at the start of a dynamic step (Rayleigh b K)
+  // The stiffness K of the state a dynamic step starts from, for its Rayleigh damping b K v:
+  // what the element products need (tetrahedron rotations, membrane frames, beam tangents and
+  // their mappings), not the assembled matrix.
+  struct DampingSnapshot {
+    std::vector<Eigen::Matrix3d> tet_rotation;
+    std::vector<Eigen::Matrix<double, 3, 2>> membrane_frame;
+    std::vector<Matrix12d> beam_tangent;
+    std::vector<Eigen::Matrix<double, 12, 24>> beam_mapping;
+  } damping_;
+  void snapshot_damping();
+  // K v with the snapshot's stiffness (N per m/s of v).
+  void damping_forces(const Eigen::VectorXd& v, Eigen::VectorXd& f);
   std::vector<int> fixed_entries_;      // off-diagonal values in fixed rows/columns
   std::vector<int> scene_fixed_nodes_;
   std::vector<char> fixed_by_scene_;  // per node

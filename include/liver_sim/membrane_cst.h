@@ -26,6 +26,10 @@ class MembraneCST {
   void update_rotations(const Eigen::VectorXd& x);
   double element_force(int e, const Eigen::VectorXd& x, Vector9d& f) const;  // returns 1/2 u^T K u (J)
   void element_tangent(int e, Matrix9d& K) const;
+  // A K A^T v_e for a given in-plane frame A (3x2): the damping force with the stiffness of an
+  // earlier state, without assembling it.
+  void tangent_product(int e, const Eigen::Matrix<double, 3, 2>& A, const Eigen::VectorXd& v, Vector9d& out) const;
+  const std::vector<Eigen::Matrix<double, 3, 2>>& frames() const { return frame_; }
 
   // Small-strain corotated in-plane strain, sym(R^T F) - I (2x2) of triangle e, for tests.
   Eigen::Matrix2d corotated_strain(int e, const Eigen::VectorXd& x) const;

@@ -1,6 +1,7 @@
 #include "liver_sim/corotational_tetra.h"
 
 
+#include <algorithm>
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <Eigen/SVD>
@@ -26,16 +27,15 @@ CorotationalTetra::CorotationalTetra(const Eigen::MatrixX3d& X, const Eigen::Mat
                                      const ParenchymaOptions& material)
     : T_(T), method_(material.rotation) {
   const int n = static_cast<int>(T.rows());
-  X_.resize(n);
   Dm_inv_.resize(n);
   rest_frame_T_.resize(n);
   grad_N_.resize(n);
   volume_.resize(n);
   R_.assign(n, Eigen::Matrix3d::Identity());
+  q_.assign(n, Eigen::Quaterniond::Identity());
   for (int e = 0; e < n; ++e) {
     Eigen::Matrix3d Dm;
-    for (int i = 0; i < 4; ++i) X_[e].segment<3>(3 * i) = X.row(T(e, i)).transpose();
-    for (int i = 0; i < 3; ++i) Dm.col(i) = X_[e].segment<3>(3 * (i + 1)) - X_[e].head<3>();
+    for (int i = 0; i < 3; ++i) Dm.col(i) = (X.row(T(e, i + 1)) - X.row(T(e, 0))).transpose();
     volume_[e] = Dm.determinant() / 6.0;
     Dm_inv_[e] = Dm.inverse();
     rest_frame_T_[e] = edge_frame(Dm.col(0), Dm.col(1)).transpose();
@@ -50,6 +50,8 @@ void CorotationalTetra::set_material(const ParenchymaOptions& material) {
   const double E = material.young_modulus, nu = material.poisson_ratio;
   const double lambda = E * nu / ((1 + nu) * (1 - 2 * nu));
   const double mu = E / (2 * (1 + nu));
+  lambda_ = lambda;
+  mu_ = mu;
   K0_.resize(volume_.size());
   for (size_t e = 0; e < volume_.size(); ++e) {
     // K_ab = V (lambda g_a g_b^T + mu g_b g_a^T + mu (g_a . g_b) I): isotropic linear elasticity.
@@ -77,22 +79,13 @@ Eigen::Matrix3d CorotationalTetra::rotation_geometric(int e, const Eigen::Vector
   return edge_frame(node(x, T_(e, 1)) - x0, node(x, T_(e, 2)) - x0) * rest_frame_T_[e];
 }
 
-Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F) {
-  // Fast path (elements not inverted or flattened): scaled Newton iteration for the polar
-  // factor, X <- (g X + X^-T / g) / 2 with Frobenius-norm scaling (Higham 1986), to round-off:
-  // the Jacobian products of the Newton-Krylov solver difference the forces at 1e-8 steps.
-  if (F.determinant() > 1e-3 * F.squaredNorm() * F.norm()) {
-    Eigen::Matrix3d X = F;
-    for (int k = 0; k < 20; ++k) {
-      const Eigen::Matrix3d X_inv_T = X.inverse().transpose();
-      const double g = std::sqrt(X_inv_T.norm() / X.norm());
-      const Eigen::Matrix3d next = 0.5 * (g * X + X_inv_T / g);
-      const double change = (next - X).lpNorm<Eigen::Infinity>();
-      X = next;
-      if (change < 1e-14) break;
-    }
-    return X;
-  }
+namespace {
+
+// det F above this (relative to |F|^3): neither inverted nor nearly flat, so the Newton
+// iterations below converge; otherwise the SVD decides.
+bool well_shaped(const Eigen::Matrix3d& F) { return F.determinant() > 1e-3 * F.squaredNorm() * F.norm(); }
+
+Eigen::Matrix3d polar_rotation_svd(const Eigen::Matrix3d& F) {
   const Eigen::JacobiSVD<Eigen::Matrix3d> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Eigen::Matrix3d U = svd.matrixU();
   const Eigen::Matrix3d& V = svd.matrixV();
@@ -100,6 +93,73 @@ Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F) {
   // R stays a proper rotation and the element is pushed back through (Irving et al. 2004).
   if ((U * V.transpose()).determinant() < 0) U.col(2) = -U.col(2);
   return U * V.transpose();
+}
+
+}  // namespace
+
+Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F) {
+  // Scaled Newton iteration for the polar factor, X <- (g X + X^-T / g) / 2 with Frobenius-norm
+  // scaling (Higham 1986), to round-off: the Jacobian products of the Newton-Krylov solver
+  // difference the forces at 1e-8 steps.
+  if (!well_shaped(F)) return polar_rotation_svd(F);
+  Eigen::Matrix3d X = F;
+  for (int k = 0; k < 20; ++k) {
+    const Eigen::Matrix3d X_inv_T = X.inverse().transpose();
+    const double g = std::sqrt(X_inv_T.norm() / X.norm());
+    const Eigen::Matrix3d next = 0.5 * (g * X + X_inv_T / g);
+    const double change = (next - X).lpNorm<Eigen::Infinity>();
+    X = next;
+    if (change < 1e-14) break;
+  }
+  return X;
+}
+
+Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F, Eigen::Quaterniond& q) {
+  // Newton on the rotation itself, from q: R = R(q) exp(w) with w from the skew part of
+  // G = R^T F, (tr(S) I - S) w = axial(G - G^T), S = sym(G). It converges quadratically from a
+  // nearby rotation (an element's rotation changes little between two evaluations): two
+  // iterations where the scaled iteration from F needs five or more. The unit quaternion stays a
+  // rotation to round-off however often it is updated. The fixed point with A = tr(S) I - S
+  // positive definite is the SVD's answer also for an inverted element, so no shape test is
+  // needed here.
+  for (int k = 0; k < 6; ++k) {
+    const Eigen::Matrix3d G = q.toRotationMatrix().transpose() * F;
+    const Eigen::Vector3d a(G(2, 1) - G(1, 2), G(0, 2) - G(2, 0), G(1, 0) - G(0, 1));
+    const double trace = G.trace();
+    const double a00 = trace - G(0, 0), a11 = trace - G(1, 1), a22 = trace - G(2, 2);
+    const double a01 = -0.5 * (G(0, 1) + G(1, 0)), a02 = -0.5 * (G(0, 2) + G(2, 0)), a12 = -0.5 * (G(1, 2) + G(2, 1));
+    // A is positive definite at the polar factor (its eigenvalues are sums of two singular
+    // values) and near it; not at the other rotations that make G symmetric (a half turn away).
+    // Otherwise, or too far (or not finite), start from F.
+    const double c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+    const double det = a00 * c00 + a01 * c01 + a02 * c02;
+    if (!(a00 > 0 && a00 * a11 > a01 * a01 && det > 0)) break;
+    const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+    const auto solve = [&](const Eigen::Vector3d& b) -> Eigen::Vector3d {  // A^-1 b by cofactors
+      return Eigen::Vector3d(c00 * b[0] + c01 * b[1] + c02 * b[2], c01 * b[0] + c11 * b[1] + c12 * b[2],
+                             c02 * b[0] + c12 * b[1] + c22 * b[2]) *
+             (1.0 / det);
+    };
+    const Eigen::Vector3d w1 = solve(a);
+    const double w2 = w1.squaredNorm();
+    if (!(w2 < 0.25)) break;
+    // The second-order terms of the skew part of exp(-w) G, (a x w + S w x w) / 2, evaluated at
+    // the first-order w: the error of the step falls from ~|w|^2 to ~|w|^3, so one iteration
+    // suffices for the changes between evaluations (|w| < 1e-5).
+    const Eigen::Matrix3d S = 0.5 * (G + G.transpose());
+    const Eigen::Vector3d w = solve(a + 0.5 * (a.cross(w1) + (S * w1).cross(w1)));
+    // q (1, w/2): exp(w) to third order, once back to unit length.
+    const Eigen::Vector3d h = 0.5 * w;
+    const Eigen::Vector3d v = q.vec();
+    const Eigen::Vector4d next(q.w() * h.x() + v.y() * h.z() - v.z() * h.y() + v.x(),
+                               q.w() * h.y() + v.z() * h.x() - v.x() * h.z() + v.y(),
+                               q.w() * h.z() + v.x() * h.y() - v.y() * h.x() + v.z(), q.w() - v.dot(h));
+    q.coeffs() = next * (1.0 / next.norm());
+    if (w2 < 1e-10) return q.toRotationMatrix();  // converged to ~|w|^3
+  }
+  const Eigen::Matrix3d R = polar_rotation(F);
+  q = Eigen::Quaterniond(R);
+  return R;
 }
 
 Eigen::Matrix3d cross_matrix(const Eigen::Vector3d& w) {
@@ -125,41 +185,58 @@ Eigen::Matrix<double, 3, 12> polar_rotation_derivative(const Eigen::Matrix3d& R,
   return G;
 }
 
-Eigen::Matrix3d CorotationalTetra::rotation_polar(int e, const Eigen::VectorXd& x) const {
-  return polar_rotation(deformation_gradient(e, x));
-}
 
 void CorotationalTetra::update_rotations(const Eigen::VectorXd& x) {
   const int n = size();
   // Independent per element: split over the cores (OpenMP).
-  if (method_ == RotationMethod::Geometric) {
 #pragma omp parallel for schedule(static)
-    for (int e = 0; e < n; ++e) R_[e] = rotation_geometric(e, x);
-  } else {
-#pragma omp parallel for schedule(static)
-    for (int e = 0; e < n; ++e) R_[e] = rotation_polar(e, x);
-  }
+  for (int e = 0; e < n; ++e) update_rotation(e, x, deformation_gradient(e, x));
 }
 
-Vector12d CorotationalTetra::corotated_displacement(int e, const Eigen::VectorXd& x) const {
+void CorotationalTetra::reset_rotations() {
+  std::fill(R_.begin(), R_.end(), Eigen::Matrix3d::Identity());
+  std::fill(q_.begin(), q_.end(), Eigen::Quaterniond::Identity());
+}
+
+void CorotationalTetra::update_rotation(int e, const Eigen::VectorXd& x, const Eigen::Matrix3d& F) {
+  // Polar: warm-started from the element's last rotation.
+  R_[e] = method_ == RotationMethod::Geometric ? rotation_geometric(e, x) : polar_rotation(F, q_[e]);
+}
+
+Eigen::Matrix3d CorotationalTetra::rotated_stress(const Eigen::Matrix3d& G) const {
+  // K0 u = V sigma g per node (g: shape-function gradient), with the linear strain sym(G) of the
+  // displacement gradient G in the element's frame: 50 flops instead of the 12x12 product
+  // and its 1 kB of K0 read from memory.
+  const Eigen::Matrix3d strain = 0.5 * (G + G.transpose());
+  Eigen::Matrix3d stress = 2 * mu_ * strain;
+  stress.diagonal().array() += lambda_ * strain.trace();
+  return stress;
+}
+
+void CorotationalTetra::nodal_forces(int e, const Eigen::Matrix3d& P, Vector12d& f) const {
+  // f_a = V P g_a; the gradients sum to zero, so node 0 takes minus the others.
+  const Eigen::Matrix3d fs = volume_[e] * P * Dm_inv_[e].transpose();
+  f.segment<3>(3) = fs.col(0);
+  f.segment<3>(6) = fs.col(1);
+  f.segment<3>(9) = fs.col(2);
+  f.head<3>() = -(fs.col(0) + fs.col(1) + fs.col(2));
+}
+
+double CorotationalTetra::element_force(int e, const Eigen::VectorXd& x, Vector12d& f) {
+  const Eigen::Matrix3d F = deformation_gradient(e, x);
+  update_rotation(e, x, F);
   const Eigen::Matrix3d& R = R_[e];
-  // Displacements relative to node 0 (K0 ignores translations): keeps rounding at the scale of
-  // the element, not of the absolute coordinates.
-  const Eigen::Vector3d x0 = node(x, T_(e, 0));
-  Vector12d u;
-  u.head<3>().setZero();
-  for (int i = 1; i < 4; ++i)
-    u.segment<3>(3 * i) = R.transpose() * (node(x, T_(e, i)) - x0) -
-                          (X_[e].segment<3>(3 * i) - X_[e].head<3>());
-  return u;
+  Eigen::Matrix3d G = R.transpose() * F;
+  G.diagonal().array() -= 1.0;  // R^T F - I: the displacement gradient in the element's frame
+  const Eigen::Matrix3d stress = rotated_stress(G);
+  nodal_forces(e, R * stress, f);
+  return 0.5 * volume_[e] * (stress.cwiseProduct(G)).sum();
 }
 
-double CorotationalTetra::element_force(int e, const Eigen::VectorXd& x, Vector12d& f) const {
-  // lazyProduct: an unrolled fixed-size product, not a call into the general matrix-vector kernel.
-  const Vector12d u = corotated_displacement(e, x);
-  const Vector12d f_local = K0_[e].lazyProduct(u);
-  for (int i = 0; i < 4; ++i) f.segment<3>(3 * i) = R_[e] * f_local.segment<3>(3 * i);
-  return 0.5 * u.dot(f_local);
+void CorotationalTetra::tangent_product(int e, const Eigen::Matrix3d& R, const Eigen::VectorXd& v, Vector12d& out) const {
+  // R K0 R^T v: the same kernel on the velocity gradient rotated into the element's frame.
+  const Eigen::Matrix3d G = R.transpose() * deformation_gradient(e, v);
+  nodal_forces(e, R * rotated_stress(G), out);
 }
 
 void CorotationalTetra::element_tangent(int e, Matrix12d& K) const {

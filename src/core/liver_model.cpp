@@ -98,7 +98,6 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
     thread_forces_[t].setZero(dofs);
     thread_stiffness_[t].assign(pattern_.nonzeros(), 0.0);
   }
-  damping_stiffness_.assign(pattern_.nonzeros(), 0.0);
   system_.assign(pattern_.nonzeros(), 0.0);
   solver_cholmod_.analyze(pattern_.rows(), pattern_.column_start(), pattern_.row_index());
 
@@ -352,6 +351,8 @@ int LiverModel::capsule_triangles() const {
 
 void LiverModel::reset() {
   factor_valid_ = false;
+  tetra_.reset_rotations();
+  rotations_at_.resize(0);
   state_energy_ = std::numeric_limits<double>::quiet_NaN();
   x_ = X_;
   contacts_.clear();
@@ -387,8 +388,7 @@ void LiverModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
     return;
   }
   f.setZero(x.size());
-  tetra_.update_rotations(x);
-  if (capsule_.enabled) membrane_.update_rotations(x);
+  if (capsule_.enabled) membrane_.update_rotations(x);  // the tetrahedra's rotations come with their forces
   // Elements split over the cores, each thread adding into its own force vector (thread 0
   // into f); the vectors are summed in a fixed order, so a result depends only on the thread count.
   const int active = static_cast<int>(capsule_active_.size());
@@ -556,8 +556,8 @@ double LiverModel::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double
     // Backward Euler: M (v - v_n)/dt + D v = f_ext - f_int, v = (x - x_n)/dt, D = a M + b K.
     v_tmp_ = (x - x_start_) / dt;
     r -= mass_.cwiseProduct((v_tmp_ - v_) / dt + solver_.rayleigh_mass * v_tmp_);
-    if (solver_.rayleigh_stiffness > 0 && !v_tmp_.isZero(0.0)) {  // v = 0 as a step starts
-      pattern_.multiply(damping_stiffness_, v_tmp_, f_tmp_);
+    if (solver_.rayleigh_stiffness > 0) {
+      damping_forces(v_tmp_, f_tmp_);
       r -= solver_.rayleigh_stiffness * f_tmp_;
     }
   }
@@ -565,6 +565,58 @@ double LiverModel::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double
     if (fixed_dof_[i]) r[i] = 0;
   *reference = std::max({load_norm, internal_norm, force_floor_});
   return r.norm();
+}
+
+void LiverModel::snapshot_damping() {
+  internal_forces(x_start_, f_tmp_);  // brings rotations, frames and hosts to x_start_ (usually already there)
+  damping_.tet_rotation = tetra_.rotations();
+  if (capsule_.enabled) damping_.membrane_frame = membrane_.frames();
+  damping_.beam_tangent.resize(num_beams());
+  damping_.beam_mapping.resize(num_beams());
+  for (int e = 0; e < num_beams(); ++e) {
+    beams_->element_tangent(e, damping_.beam_tangent[e]);
+    damping_.beam_mapping[e] = beam_mapping(e);
+  }
+}
+
+void LiverModel::damping_forces(const Eigen::VectorXd& v, Eigen::VectorXd& f) {
+  f.setZero(v.size());
+  const int active = static_cast<int>(capsule_active_.size());
+#pragma omp parallel num_threads(threads_)
+  {  // as internal_forces: per-thread vectors summed in a fixed order
+    const int thread = omp_get_thread_num();
+    Eigen::VectorXd& ft = thread == 0 ? f : thread_forces_[thread];
+    if (thread > 0) ft.setZero(v.size());
+    Vector12d fe;
+#pragma omp for schedule(static) nowait
+    for (int e = 0; e < tetra_.size(); ++e) {
+      tetra_.tangent_product(e, damping_.tet_rotation[e], v, fe);
+      for (int k = 0; k < 4; ++k) ft.segment<3>(3 * mesh_.T(e, k)) += fe.segment<3>(3 * k);
+    }
+    if (capsule_.enabled) {
+      Vector9d fm;
+#pragma omp for schedule(static) nowait
+      for (int i = 0; i < active; ++i) {
+        const int t = capsule_active_[i];
+        membrane_.tangent_product(t, damping_.membrane_frame[t], v, fm);
+        for (int k = 0; k < 3; ++k) ft.segment<3>(3 * boundary_(t, k)) += fm.segment<3>(3 * k);
+      }
+    }
+  }
+  for (int thread = 1; thread < threads_; ++thread) f += thread_forces_[thread];
+  for (int e = 0; e < num_beams(); ++e) {
+    Eigen::Matrix<double, 24, 1> ve;
+    for (int end = 0; end < 2; ++end) {
+      const int tet = vessel_nodes_[beams_->segments()(e, end)].tet;
+      for (int k = 0; k < 4; ++k) ve.segment<3>(12 * end + 3 * k) = v.segment<3>(3 * mesh_.T(tet, k));
+    }
+    const Eigen::Matrix<double, 12, 24>& J = damping_.beam_mapping[e];
+    const Eigen::Matrix<double, 24, 1> fe = J.transpose() * (damping_.beam_tangent[e] * (J * ve));
+    for (int end = 0; end < 2; ++end) {
+      const int tet = vessel_nodes_[beams_->segments()(e, end)].tet;
+      for (int k = 0; k < 4; ++k) f.segment<3>(3 * mesh_.T(tet, k)) += fe.segment<3>(12 * end + 3 * k);
+    }
+  }
 }
 
 void LiverModel::assemble_system() {
@@ -631,6 +683,15 @@ StepResult LiverModel::step() {
   x_start_ = x_;  // the last good state, restored if the step diverges
   contact_force_start_ = contact_force_;
   const bool dynamic = solver_.mode == SolverOptions::Mode::Dynamic;
+  if (dynamic && solver_.rayleigh_stiffness > 0) {
+    // Rayleigh damping b K v with the stiffness of the state the step starts from, fixed within
+    // the step so that the residual stays one function of x while Newton iterates; applied
+    // element by element, not assembled (an assembly per step cost a third of a haptic frame).
+    const auto t0 = Clock::now();
+    snapshot_damping();
+    result.timing.assembly_ms += ms_since(t0);
+  }
+  if (dynamic && getenv("PREDICT")) x_ = x_start_ + solver_.dt * v_;
   // An instrument that moves more than a quarter of its size in one step (or appears: it comes
   // in along its axis from where it touches no node) is moved there in stages, each solved, so
   // that no node is caught deep inside it and pushed out through its far side.
@@ -653,6 +714,11 @@ StepResult LiverModel::step() {
                           Eigen::Quaterniond(from[i].linear()).slerp(s, Eigen::Quaterniond(to[i].linear())));
     }
     x_stage_ = x_;
+    // Dynamic: Newton starts from the constant-velocity prediction x_n + dt v_n, whose error is
+    // O(dt^2), not O(dt): one iteration of modified Newton then lands 80x closer to the
+    // converged step on the aspiration cube (README, "Fast and accurate"). Not with contacts:
+    // a predicted node could start inside an instrument.
+    if (dynamic && k == 1 && contacts_.empty()) x_ += solver_.dt * v_;
     newton(result);
   }
   if (dynamic && result.status != StepResult::Status::Diverged && result.iterations > 0) {
@@ -744,22 +810,15 @@ void LiverModel::newton(StepResult& result) {
       break;
     }
     ++result.iterations;
-    // Rayleigh damping uses the stiffness at the start of the step, fixed within the step, so
-    // that the residual stays one function of x while Newton iterates. (v = 0 there, so the
-    // residual already computed is unchanged.) Damping with the tangent of an older step, to
-    // save the assembly, made the aspiration tube's dynamics take 10x the Newton iterations.
-    const bool damping_snapshot = result.iterations == 1 && solver_.mode == SolverOptions::Mode::Dynamic &&
-                                  solver_.rayleigh_stiffness > 0;
     using Strategy = SolverOptions::Strategy;
     const Strategy strategy = contacts_.empty() ? solver_.strategy : Strategy::NewtonKrylov;
     const bool current_tangent = strategy == Strategy::FullNewton || strategy == Strategy::FullNewtonEigen ||
                                  strategy == Strategy::ReusedFactorCG || strategy == Strategy::CG;
     if (strategy == Strategy::FullNewton) factor_valid_ = false;
     const bool uses_factor = strategy != Strategy::FullNewtonEigen && strategy != Strategy::CG;
-    if (!factor_valid_ || current_tangent || damping_snapshot) {
+    if (!factor_valid_ || current_tangent) {
       t0 = Clock::now();
       assemble_system();
-      if (damping_snapshot) damping_stiffness_ = stiffness_;
       result.timing.assembly_ms += ms_since(t0);
     }
     if (strategy == Strategy::FullNewtonEigen) {

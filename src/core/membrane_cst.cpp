@@ -76,9 +76,10 @@ Eigen::Matrix<double, 3, 2> MembraneCST::current_frame(int e, const Eigen::Vecto
   Eigen::Matrix2d Q;
   Q << axes.transpose() * (node(x, F_(e, 1)) - x0), axes.transpose() * (node(x, F_(e, 2)) - x0);
   const Eigen::Matrix2d F2 = Q * Pm_inv_[e];
-  const double theta = std::atan2(F2(1, 0) - F2(0, 1), F2(0, 0) + F2(1, 1));
-  Eigen::Matrix2d R2;
-  R2 << std::cos(theta), -std::sin(theta), std::sin(theta), std::cos(theta);
+  // The rotation angle is atan2(F10 - F01, F00 + F11); its cosine and sine without trigonometry.
+  const double c = F2(0, 0) + F2(1, 1), s = F2(1, 0) - F2(0, 1), r = std::sqrt(c * c + s * s);
+  Eigen::Matrix2d R2 = Eigen::Matrix2d::Identity();
+  if (r > 0) R2 << c / r, -s / r, s / r, c / r;
   return axes * R2;
 }
 
@@ -108,6 +109,14 @@ void MembraneCST::element_tangent(int e, Matrix9d& K) const {
   for (int a = 0; a < 3; ++a)
     for (int b = 0; b < 3; ++b)
       K.block<3, 3>(3 * a, 3 * b).noalias() = A * K2_[e].block<2, 2>(2 * a, 2 * b) * A.transpose();
+}
+
+void MembraneCST::tangent_product(int e, const Eigen::Matrix<double, 3, 2>& A, const Eigen::VectorXd& v,
+                                  Vector9d& out) const {
+  Eigen::Matrix<double, 6, 1> v2;
+  for (int i = 0; i < 3; ++i) v2.segment<2>(2 * i) = A.transpose() * node(v, F_(e, i));
+  const Eigen::Matrix<double, 6, 1> f2 = K2_[e].lazyProduct(v2);
+  for (int i = 0; i < 3; ++i) out.segment<3>(3 * i) = A * f2.segment<2>(2 * i);
 }
 
 Eigen::Matrix2d MembraneCST::corotated_strain(int e, const Eigen::VectorXd& x) const {

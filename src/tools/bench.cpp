@@ -43,6 +43,7 @@ struct Run {
   std::vector<Eigen::VectorXd> displacement;  // per frame
   int newton_iterations = 0, factorizations = 0, linear_iterations = 0, diverged = 0;
   double factorization_ms = 0;
+  std::string first_rollback;  // why the first rolled-back frame was
   long tets = 0, dofs = 0;
 };
 
@@ -99,11 +100,13 @@ Run run(const std::string& scene_path, std::vector<std::string> overrides, const
     r.factorizations += s.factorizations;
     r.linear_iterations += s.linear_iterations;
     r.factorization_ms += s.timing.factorization_ms;
-    r.diverged += s.status == StepResult::Status::Diverged;
+    if (s.status == StepResult::Status::Diverged && r.diverged++ == 0) r.first_rollback = s.message;
   }
   if (!quiet)
     std::cerr << "bench: " << spec.text << ": " << r.tets << " tetrahedra, " << frames << " frames, "
-              << r.newton_iterations << " Newton iterations, " << r.factorizations << " factorisations\n";
+              << r.newton_iterations << " Newton iterations, " << r.factorizations << " factorisations";
+  if (!quiet && r.diverged) std::cerr << ", " << r.diverged << " frames rolled back (first: " << r.first_rollback << ")";
+  if (!quiet) std::cerr << "\n";
   return r;
 }
 
