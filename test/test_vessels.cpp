@@ -433,5 +433,27 @@ TEST(LiverPhantom, HasTheStatedSizeVesselsAndTargets) {
   EXPECT_NEAR(extent.z(), 0.095, 0.005);
 }
 
+// Real-time frames on the phantom (10 ms, one modified-Newton iteration each, breathing
+// gravity): when the old factor no longer gives descent the iteration is redone on a fresh one.
+// Spending it instead stalled frame 19 and rolled it back.
+TEST(LiverPhantom, CappedFramesOnAStaleFactorAreRedoneNotRolledBack) {
+  const std::string path = std::string(LIVER_SIM_SOURCE_DIR) + "/config/scenes/liver_phantom.yaml";
+  const Scene s0 = load_scene(path, {"solver.strategy=newton_krylov", "solver.tolerance=1e-10", "solver.max_iterations=100"});
+  LiverModel equilibrium(load_scene_mesh(s0), s0);
+  ASSERT_TRUE(equilibrium.step().converged());
+  const Scene s = load_scene(path, {"solver.mode=dynamic", "solver.strategy=modified_newton", "solver.max_iterations=1",
+                                    "solver.tolerance=1e-300", "solver.dt=0.01"});
+  LiverModel m(load_scene_mesh(s), s);
+  m.set_positions(equilibrium.positions());
+  int factorizations = 0;
+  for (int k = 1; k <= 30; ++k) {
+    m.set_load_scale(1 + 0.5 * std::sin(2 * M_PI * k * s.solver.dt));
+    const StepResult r = m.step();
+    ASSERT_NE(r.status, StepResult::Status::Diverged) << "frame " << k << ": " << r.message;
+    factorizations += r.factorizations;
+  }
+  EXPECT_GE(factorizations, 2);  // the first, and at least one refresh
+}
+
 }  // namespace
 }  // namespace liver_sim

@@ -767,6 +767,7 @@ void LiverModel::newton(StepResult& result) {
     result.message = why;
   };
   const int iterations_before = result.iterations;
+  bool refreshed = false;  // a modified-Newton iteration on an old factor has been redone on a new one
   auto t0 = Clock::now();
   double reference = 0;
   detect_contacts(x_);
@@ -838,7 +839,8 @@ void LiverModel::newton(StepResult& result) {
     }
     // The factor of an earlier tangent keeps serving as the preconditioner (GMRES works on the
     // true Jacobian) until it no longer preconditions well or the constraints changed.
-    if (uses_factor && !factor_valid_) {
+    const bool fresh_factor = uses_factor && !factor_valid_;
+    if (fresh_factor) {
       t0 = Clock::now();
       const bool factored = solver_cholmod_.factorize(system_);
       result.timing.factorization_ms += ms_since(t0);
@@ -930,6 +932,15 @@ void LiverModel::newton(StepResult& result) {
       best_norm = residual(x_try_, r_try_, &ref_try);
     }
     result.timing.assembly_ms += ms_since(t0);
+    // Modified Newton on an old factor that finds no descent: the factor no longer fits the
+    // state. Refactorise and redo the iteration (once per step) instead of spending the
+    // iteration, which in a capped real-time frame would stall it and roll it back.
+    if (strategy == Strategy::ModifiedNewton && !fresh_factor && !refreshed && best_merit >= current_merit) {
+      refreshed = true;
+      factor_valid_ = false;
+      --result.iterations;
+      continue;
+    }
     x_.swap(x_try_);
     r_.swap(r_try_);
     // Modified Newton keeps its factor while it contracts the residual well.
