@@ -22,7 +22,7 @@ loads:
   - {type: pressure, value: -3000, region: {disc: {center: [0, 0, 1], normal: [0, 0, 1], radius: 0.005}}}
   - {type: gravity, acceleration: [0, 0, -9.81]}
   - {type: force, total: [0, 0.5, 0], region: {box: {min: [0, 0, 0], max: [1, 1, 1]}}}
-solver: {mode: dynamic, dt: 0.001, steps: 20, max_iterations: 5, tolerance: 1e-7, line_search: false,
+solver: {mode: dynamic, predictor: constant_acceleration, dt: 0.001, steps: 20, max_iterations: 5, tolerance: 1e-7, line_search: false,
          rayleigh_mass: 0.5, rayleigh_stiffness: 0.01}
 probes: [{name: centre, point: [0.0075, 0.0075, 0.015]}]
 )";
@@ -72,6 +72,7 @@ TEST(Scene, ParsesEverySection) {
   EXPECT_EQ(s.solver.steps, 20);
   EXPECT_FALSE(s.solver.line_search);
   EXPECT_EQ(s.solver.rayleigh_stiffness, 0.01);
+  EXPECT_EQ(s.solver.predictor, SolverOptions::Predictor::ConstantAcceleration);
   ASSERT_EQ(s.probes.size(), 1u);
   EXPECT_EQ(s.probes[0].point.z(), 0.015);
 }
@@ -116,6 +117,7 @@ TEST(Scene, UnknownKeysAndWrongTypesNameTheKey) {
   EXPECT_ERROR(std::string(kMinimal) + "parenchyma: {young_modulus: .nan}\n", "must be finite");
   EXPECT_ERROR(std::string(kMinimal) + "parenchyma: {rotation: qr}\n", "parenchyma.rotation: expected");
   EXPECT_ERROR(std::string(kMinimal) + "solver: {mode: quasi}\n", "solver.mode");
+  EXPECT_ERROR(std::string(kMinimal) + "solver: {predictor: cubic}\n", "solver.predictor");
   EXPECT_ERROR(std::string(kMinimal) + "probes: [{name: a, point: [0, 0]}]\n", "probes.0.point: expected a list of 3");
   EXPECT_ERROR(std::string(kMinimal) + "probes: [{name: a, point: [0, 0, 0]}, {name: a, point: [0, 0, 0]}]\n", "unique");
   EXPECT_ERROR(std::string(kMinimal) + "loads: [{type: magnetic}]\n", "loads.0.type");

@@ -334,6 +334,7 @@ class LiverModel {
   CholmodSolver solver_cholmod_;
 
   Eigen::VectorXd X_, x_, v_, x_start_;
+  Eigen::VectorXd v_previous_;  // velocity of the step before the last (the predictor's acceleration)
   Eigen::VectorXd mass_;  // lumped, per DOF (kg)
   std::vector<PressureLoad> pressures_;
   std::vector<NodalLoad> nodal_loads_;  // spread forces

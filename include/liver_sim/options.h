@@ -67,8 +67,15 @@ struct SolverOptions {
     CG,               // conjugate gradients on the current tangent, Jacobi preconditioner
     ModifiedNewton    // an earlier factor solved directly; refreshed when the residual falls slowly
   };
+  // Where a dynamic step's Newton iteration starts (README, "Fast and accurate"); the converged
+  // step does not depend on it, a capped real-time frame does.
+  enum class Predictor {
+    ConstantVelocity,     // x_n + dt v_n
+    ConstantAcceleration  // x_n + dt v_n + dt^2 a_n, a_n = (v_n - v_n-1) / dt
+  };
   Mode mode = Mode::Static;
   Strategy strategy = Strategy::NewtonKrylov;
+  Predictor predictor = Predictor::ConstantVelocity;
   double dt = 0.01;               // s, time step of the dynamic mode
   int steps = 1;                  // static: load increments; dynamic: time steps
   int max_iterations = 30;        // Newton iterations per step (cap)

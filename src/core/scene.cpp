@@ -373,9 +373,14 @@ class Reader {
   }
 
   void read_solver(const YAML::Node& v, SolverOptions& o) const {
-    check_keys(v, "solver", {"mode", "strategy", "dt", "steps", "max_iterations", "tolerance", "line_search",
-                             "rayleigh_mass", "rayleigh_stiffness"});
+    check_keys(v, "solver", {"mode", "strategy", "predictor", "dt", "steps", "max_iterations", "tolerance",
+                             "line_search", "rayleigh_mass", "rayleigh_stiffness"});
     if (v["strategy"]) o.strategy = strategy(v["strategy"], "solver.strategy");
+    if (v["predictor"])
+      o.predictor = word(v["predictor"], "solver.predictor", {"constant_velocity", "constant_acceleration"}) ==
+                            "constant_velocity"
+                        ? SolverOptions::Predictor::ConstantVelocity
+                        : SolverOptions::Predictor::ConstantAcceleration;
     if (v["mode"])
       o.mode = word(v["mode"], "solver.mode", {"static", "dynamic"}) == "static" ? SolverOptions::Mode::Static
                                                                                 : SolverOptions::Mode::Dynamic;
