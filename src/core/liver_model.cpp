@@ -813,7 +813,7 @@ void LiverModel::newton(StepResult& result) {
           << " iterations, no lower than the " << start_merit << " N it started from";
         fail(m.str());
       } else {
-        result.message = "iteration cap reached";
+        result.message = "iteration cap";  // within the string's inline buffer: no allocation per frame
       }
       break;
     }
