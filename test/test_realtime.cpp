@@ -10,7 +10,13 @@
 
 #include "liver_sim/liver_model.h"
 
-#if !defined(__SANITIZE_ADDRESS__)
+// A sanitizer brings its own malloc, which this one would bypass.
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) || __has_feature(memory_sanitizer)
+#define LIVER_SIM_OWN_MALLOC 1
+#endif
+#endif
+#if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__) && !defined(LIVER_SIM_OWN_MALLOC)
 #define LIVER_SIM_COUNT_MALLOC 1
 namespace {
 std::atomic<bool> counting{false};

@@ -39,7 +39,7 @@ class CorotationalTetra {
   // Updates the rotation of every element from current positions x (3 #V, node-major).
   void update_rotations(const Eigen::VectorXd& x);
   // Back to the rest rotations (identity), where the polar iterations start: a model that is
-  // reset repeats its results to the last bit.
+  // reset repeats its tissue results to the last bit.
   void reset_rotations();
 
   // Element internal force (12, the force the element needs to be held in shape x); updates

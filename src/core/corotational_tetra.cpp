@@ -148,14 +148,14 @@ Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F, Eigen::Quaterniond& q) 
     // suffices for the changes between evaluations (|w| < 1e-5).
     const Eigen::Matrix3d S = 0.5 * (G + G.transpose());
     const Eigen::Vector3d w = solve(a + 0.5 * (a.cross(w1) + (S * w1).cross(w1)));
-    // q (1, w/2): exp(w) to third order, once back to unit length.
+    // q (1, w/2), back to unit length: the rotation exp(w) with an angle error of |w|^3 / 12.
     const Eigen::Vector3d h = 0.5 * w;
     const Eigen::Vector3d v = q.vec();
     const Eigen::Vector4d next(q.w() * h.x() + v.y() * h.z() - v.z() * h.y() + v.x(),
                                q.w() * h.y() + v.z() * h.x() - v.x() * h.z() + v.y(),
                                q.w() * h.z() + v.x() * h.y() - v.y() * h.x() + v.z(), q.w() - v.dot(h));
     q.coeffs() = next * (1.0 / next.norm());
-    if (w2 < 1e-10) return q.toRotationMatrix();  // converged to ~|w|^3
+    if (w2 < 1e-10) return q.toRotationMatrix();  // converged to ~|w|^3 < 1e-15
   }
   const Eigen::Matrix3d R = polar_rotation(F);
   q = Eigen::Quaterniond(R);

@@ -176,6 +176,7 @@ LiverModel::LiverModel(TetMesh mesh, const Scene& scene)
     v->setZero(dofs);
   compliance_slot_.assign(n, -1);
   for (const InstrumentOptions& o : scene.instruments) add_instrument(o);
+  snapshot_damping();  // so that any residual before the first step finds one
 }
 
 LiverModel::EmbeddedPoint LiverModel::locate(const Eigen::Vector3d& p) const {
@@ -330,6 +331,9 @@ std::string LiverModel::set_capsule(const CapsuleOptions& capsule) {
   capsule_active_ = std::move(active);
   capsule_ = capsule;
   factor_valid_ = false;
+  // The membranes' frames for the damping, should a residual be evaluated before the next step
+  // (the constructor takes its own snapshot once it is complete).
+  if (!damping_.tet_rotation.empty()) snapshot_damping();
   return "";
 }
 
@@ -342,6 +346,8 @@ std::string LiverModel::set_solver_options(const SolverOptions& solver) {
   if (solver.dt != solver_.dt || solver.rayleigh_mass != solver_.rayleigh_mass ||
       solver.rayleigh_stiffness != solver_.rayleigh_stiffness)
     factor_valid_ = false;
+  // The predictor's acceleration is a velocity difference over dt: a new dt starts it afresh.
+  if (solver.dt != solver_.dt) v_previous_ = v_;
   solver_ = solver;
   return "";
 }
@@ -558,7 +564,7 @@ double LiverModel::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double
     // Backward Euler: M (v - v_n)/dt + D v = f_ext - f_int, v = (x - x_n)/dt, D = a M + b K.
     v_tmp_ = (x - x_start_) / dt;
     r -= mass_.cwiseProduct((v_tmp_ - v_) / dt + solver_.rayleigh_mass * v_tmp_);
-    if (solver_.rayleigh_stiffness > 0) {
+    if (solver_.rayleigh_stiffness > 0 && !v_tmp_.isZero(0.0)) {  // v = 0: at rest, or before any step
       damping_forces(v_tmp_, f_tmp_);
       r -= solver_.rayleigh_stiffness * f_tmp_;
     }
@@ -722,6 +728,14 @@ StepResult LiverModel::step() {
     if (dynamic && k == 1 && contacts_.empty()) {
       x_ += solver_.dt * v_;
       if (solver_.predictor == SolverOptions::Predictor::ConstantAcceleration) x_ += solver_.dt * (v_ - v_previous_);
+      // An instrument that moved in this step may touch the prediction: start at x_n then.
+      if (num_instruments() > 0) {
+        detect_contacts(x_);
+        if (!contacts_.empty()) {
+          x_ = x_stage_;
+          detect_contacts(x_);
+        }
+      }
     }
     newton(result);
   }
@@ -774,7 +788,7 @@ void LiverModel::newton(StepResult& result) {
     result.message = why;
   };
   const int iterations_before = result.iterations;
-  bool refreshed = false;  // a modified-Newton iteration on an old factor has been redone on a new one
+  bool refreshed = false;  // a modified-Newton iteration on an old factor was redone on a new one
   auto t0 = Clock::now();
   double reference = 0;
   detect_contacts(x_);
@@ -919,6 +933,7 @@ void LiverModel::newton(StepResult& result) {
     double alpha = 1.0, best_alpha = 1.0, best_norm = 0, best_merit = std::numeric_limits<double>::infinity();
     double ref_try = reference;
     const int max_halvings = solver_.line_search ? 6 : 0;
+    bool accepted = false;  // a trial passed the merit or the potential test
     for (int h = 0;; ++h) {
       x_try_ = x_ + alpha * dx_;
       const double n_try = residual(x_try_, r_try_, &ref_try);
@@ -930,7 +945,8 @@ void LiverModel::newton(StepResult& result) {
         best_norm = n_try;
         best_alpha = alpha;
       }
-      if (merit_falls || potential_falls || h == max_halvings) break;
+      accepted = merit_falls || potential_falls;
+      if (accepted || h == max_halvings) break;
       alpha *= 0.5;
     }
     // None was good enough: take the best one tried.
@@ -939,13 +955,18 @@ void LiverModel::newton(StepResult& result) {
       best_norm = residual(x_try_, r_try_, &ref_try);
     }
     result.timing.assembly_ms += ms_since(t0);
-    // Modified Newton on an old factor that finds no descent: the factor no longer fits the
-    // state. Refactorise and redo the iteration (once per step) instead of spending the
-    // iteration, which in a capped real-time frame would stall it and roll it back.
-    if (strategy == Strategy::ModifiedNewton && !fresh_factor && !refreshed && best_merit >= current_merit) {
+    // Modified Newton on an old factor that finds no descent (no trial accepted, or only by the
+    // potential test in the last iteration allowed, which would end the step above where it
+    // started and roll it back as stalled): the factor no longer fits the state. Refactorise
+    // at x (evaluated again: the tangent is assembled where the last evaluation was) and redo
+    // the iteration, once per Newton solve (per instrument stage), instead of spending it.
+    const bool last_iteration = result.iterations - iterations_before == solver_.max_iterations;
+    if (strategy == Strategy::ModifiedNewton && !fresh_factor && !refreshed && best_merit >= current_merit &&
+        (!accepted || last_iteration)) {
       refreshed = true;
       factor_valid_ = false;
       --result.iterations;
+      norm = residual(x_, r_, &reference);
       continue;
     }
     x_.swap(x_try_);
