@@ -436,7 +436,9 @@ void LiverModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
 void LiverModel::add_beam_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
   for (size_t h = 0; h < hosts_.size(); ++h) {
     const Eigen::Matrix3d F = tetra_.deformation_gradient(hosts_[h], x);
-    host_rotation_[h] = polar_rotation(F);
+    // The vessel follows the polar rotation of its host; with polar parenchyma that is the
+    // rotation the tetrahedron's force has just computed at x.
+    host_rotation_[h] = parenchyma_.rotation == RotationMethod::Polar ? tetra_.rotation(hosts_[h]) : polar_rotation(F);
     host_rotation_derivative_[h] = polar_rotation_derivative(host_rotation_[h], F, tetra_.rest_edge_inverse(hosts_[h]));
   }
   for (int k = 0; k < num_vessel_nodes(); ++k) {
