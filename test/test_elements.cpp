@@ -233,6 +233,32 @@ TEST(PolarRotation, WarmStartMatchesTheScaledIterationFromAnyGuess) {
   EXPECT_GT(checked, 200);
 }
 
+// A deformed shape spinning at a constant rate about a fixed axis: the predicted guesses are the
+// next rotations exactly, and the forces from them are those of a model without history.
+TEST(PolarRotation, PredictedGuessesContinueAConstantSpin) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(2, 2, 2));
+  CorotationalTetra tets(mesh.V, mesh.T, material(RotationMethod::Polar));
+  const Eigen::VectorXd y = flatten(mesh.V) + random_field(3 * mesh.V.rows(), 0.05 * kSize, 12);
+  const Eigen::Vector3d axis = Eigen::Vector3d(0.3, -1.0, 0.4).normalized();
+  const auto spun = [&](int k) { return transform(y, Eigen::AngleAxisd(0.02 * k, axis).toRotationMatrix(), Eigen::Vector3d::Zero()); };
+  tets.update_rotations(spun(0));
+  tets.predict_rotations(false);  // records only: the guesses stay at step 0
+  for (int e = 0; e < tets.size(); ++e)
+    ASSERT_LE((tets.rotation_guess(e).toRotationMatrix() - tets.rotation(e)).cwiseAbs().maxCoeff(), 1e-15);
+  tets.update_rotations(spun(1));
+  tets.predict_rotations(true);
+  const Eigen::VectorXd x2 = spun(2);
+  CorotationalTetra fresh(mesh.V, mesh.T, material(RotationMethod::Polar));
+  for (int e = 0; e < tets.size(); ++e) {
+    const Eigen::Matrix3d expected = polar_rotation(tets.deformation_gradient(e, x2));
+    ASSERT_LE((tets.rotation_guess(e).toRotationMatrix() - expected).cwiseAbs().maxCoeff(), 1e-13) << "element " << e;
+    Vector12d f, f_fresh;
+    tets.element_force(e, x2, f);
+    fresh.element_force(e, x2, f_fresh);
+    ASSERT_LE((f - f_fresh).norm(), 1e-12 * f_fresh.norm()) << "element " << e;
+  }
+}
+
 // The element force from the stress against R K0 (R^T x - X) with the rest stiffness, and the
 // energy against 1/2 u^T K0 u, at a large deformation.
 TEST_P(TetraRotation, ForceIsTheRestStiffnessOnTheCorotatedDisplacement) {

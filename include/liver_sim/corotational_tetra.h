@@ -41,6 +41,12 @@ class CorotationalTetra {
   // Back to the rest rotations (identity), where the polar iterations start: a model that is
   // reset repeats its tissue results to the last bit.
   void reset_rotations();
+  // Before a dynamic step's first evaluation at a predicted state, with the rotations of the
+  // step's start current: the polar iterations start from them continued at constant angular
+  // velocity, R_n R_n-1^T R_n, where R_n-1 were current at the last call, if that call was one
+  // step ago (continued); else they are only recorded. The guesses change, the results do not
+  // (to round-off): one iteration then suffices where the rotation changed by more than ~1e-5.
+  void predict_rotations(bool continued);
 
   // Element internal force (12, the force the element needs to be held in shape x); updates
   // the element's rotation to x first. Returns the strain energy 1/2 u^T K0 u of the corotated
@@ -55,6 +61,8 @@ class CorotationalTetra {
   // Rotation of element e from the last update; rest stiffness; rest volume (m^3).
   const Eigen::Matrix3d& rotation(int e) const { return R_[e]; }
   const std::vector<Eigen::Matrix3d>& rotations() const { return R_; }
+  // Where element e's next polar iteration starts (for tests).
+  const Eigen::Quaterniond& rotation_guess(int e) const { return q_[e]; }
   const Matrix12d& rest_stiffness(int e) const { return K0_[e]; }
   double volume(int e) const { return volume_[e]; }
   int size() const { return static_cast<int>(K0_.size()); }
@@ -85,6 +93,7 @@ class CorotationalTetra {
   double lambda_ = 0, mu_ = 0;   // Lame parameters (Pa)
   std::vector<Eigen::Matrix3d> R_;
   std::vector<Eigen::Quaterniond> q_;  // R_ as a unit quaternion: where the next polar iteration starts
+  std::vector<Eigen::Quaterniond> q_step_;  // q_ at the last predict_rotations (the previous step's start)
 };
 
 }  // namespace liver_sim

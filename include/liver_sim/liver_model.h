@@ -335,6 +335,7 @@ class LiverModel {
 
   Eigen::VectorXd X_, x_, v_, x_start_;
   Eigen::VectorXd v_previous_;  // velocity of the step before the last (the predictor's acceleration)
+  bool rotations_continued_ = false;  // the last step predicted the rotations and was accepted
   Eigen::VectorXd mass_;  // lumped, per DOF (kg)
   std::vector<PressureLoad> pressures_;
   std::vector<NodalLoad> nodal_loads_;  // spread forces

@@ -33,6 +33,7 @@ CorotationalTetra::CorotationalTetra(const Eigen::MatrixX3d& X, const Eigen::Mat
   volume_.resize(n);
   R_.assign(n, Eigen::Matrix3d::Identity());
   q_.assign(n, Eigen::Quaterniond::Identity());
+  q_step_ = q_;
   for (int e = 0; e < n; ++e) {
     Eigen::Matrix3d Dm;
     for (int i = 0; i < 3; ++i) Dm.col(i) = (X.row(T(e, i + 1)) - X.row(T(e, 0))).transpose();
@@ -196,6 +197,16 @@ void CorotationalTetra::update_rotations(const Eigen::VectorXd& x) {
 void CorotationalTetra::reset_rotations() {
   std::fill(R_.begin(), R_.end(), Eigen::Matrix3d::Identity());
   std::fill(q_.begin(), q_.end(), Eigen::Quaterniond::Identity());
+  std::fill(q_step_.begin(), q_step_.end(), Eigen::Quaterniond::Identity());
+}
+
+void CorotationalTetra::predict_rotations(bool continued) {
+  if (method_ != RotationMethod::Polar) return;
+  for (int e = 0; e < size(); ++e) {
+    const Eigen::Quaterniond q = q_[e];
+    if (continued) q_[e] = (q * q_step_[e].conjugate() * q).normalized();
+    q_step_[e] = q;
+  }
 }
 
 void CorotationalTetra::update_rotation(int e, const Eigen::VectorXd& x, const Eigen::Matrix3d& F) {

@@ -346,8 +346,12 @@ std::string LiverModel::set_solver_options(const SolverOptions& solver) {
   if (solver.dt != solver_.dt || solver.rayleigh_mass != solver_.rayleigh_mass ||
       solver.rayleigh_stiffness != solver_.rayleigh_stiffness)
     factor_valid_ = false;
-  // The predictor's acceleration is a velocity difference over dt: a new dt starts it afresh.
-  if (solver.dt != solver_.dt) v_previous_ = v_;
+  // The predictor's acceleration and the rotations' angular velocity are differences over one
+  // step: a new dt starts them afresh.
+  if (solver.dt != solver_.dt) {
+    v_previous_ = v_;
+    rotations_continued_ = false;
+  }
   solver_ = solver;
   return "";
 }
@@ -373,6 +377,7 @@ void LiverModel::reset() {
   }
   v_.setZero();
   v_previous_.setZero();
+  rotations_continued_ = false;
   x_start_ = X_;
   time_ = 0;
   surface_targets_.clear();
@@ -713,6 +718,7 @@ StepResult LiverModel::step() {
     from.push_back(in.pose_start);
     to.push_back(in.pose);
   }
+  bool rotations_predicted = false;
   for (int k = 1; k <= stages && result.status != StepResult::Status::Diverged; ++k) {
     for (int i = 0; i < num_instruments(); ++i) {
       Instrument& in = instruments_[i];
@@ -738,6 +744,12 @@ StepResult LiverModel::step() {
           detect_contacts(x_);
         }
       }
+      // The rotations follow the prediction as a guess (warm polar iterations), when they are
+      // those of x_n.
+      if (contacts_.empty() && rotations_at_.size() == x_.size() && rotations_at_ == x_stage_) {
+        tetra_.predict_rotations(rotations_continued_);
+        rotations_predicted = true;
+      }
     }
     newton(result);
   }
@@ -761,6 +773,7 @@ StepResult LiverModel::step() {
   } else {
     state_energy_ = std::numeric_limits<double>::quiet_NaN();
   }
+  rotations_continued_ = rotations_predicted && result.status != StepResult::Status::Diverged;
   if (result.status == StepResult::Status::Diverged) {
     x_ = x_start_;
     contact_force_ = contact_force_start_;
