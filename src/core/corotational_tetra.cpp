@@ -202,7 +202,9 @@ void CorotationalTetra::reset_rotations() {
 
 void CorotationalTetra::predict_rotations(bool continued) {
   if (method_ != RotationMethod::Polar) return;
-  for (int e = 0; e < size(); ++e) {
+  const int n = size();
+#pragma omp parallel for schedule(static)
+  for (int e = 0; e < n; ++e) {
     const Eigen::Quaterniond q = q_[e];
     if (continued) q_[e] = (q * q_step_[e].conjugate() * q).normalized();
     q_step_[e] = q;
