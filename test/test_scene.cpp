@@ -90,8 +90,9 @@ TEST(Scene, DefaultsWhenSectionsAreMissing) {
 
 TEST(Scene, OverridesScalarsCreatingMissingKeysAndIndexingLists) {
   const Scene s = parse_scene(kFull, "/base", "scene.yaml",
-                              {"capsule.enabled=false", "loads.0.value=-5000", "solver.mode=static"});
+                              {"capsule.enabled=false", "loads.0.value=-5000", "solver.mode=static", "solver.predictor=none"});
   EXPECT_FALSE(s.capsule.enabled);
+  EXPECT_EQ(s.solver.predictor, SolverOptions::Predictor::None);
   EXPECT_EQ(s.loads[0].pressure, -5000);
   EXPECT_EQ(s.solver.mode, SolverOptions::Mode::Static);
   const Scene m = parse_scene(kMinimal, "/base", "scene.yaml", {"capsule.enabled=true", "capsule.thickness=1e-5"});

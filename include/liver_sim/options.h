@@ -70,6 +70,7 @@ struct SolverOptions {
   // Where a dynamic step's Newton iteration starts (README, "Fast and accurate"); the converged
   // step does not depend on it, a capped real-time frame does.
   enum class Predictor {
+    None,                 // x_n: Newton starts at the last state
     ConstantVelocity,     // x_n + dt v_n
     ConstantAcceleration  // x_n + dt v_n + dt^2 a_n, a_n = (v_n - v_n-1) / dt
   };

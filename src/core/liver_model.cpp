@@ -733,7 +733,7 @@ StepResult LiverModel::step() {
     // O(dt^2) or O(dt^3), not O(dt): one iteration of modified Newton then lands 100x closer to
     // the converged step (README, "Fast and accurate"). Not with contacts: a predicted node
     // could start inside an instrument.
-    if (dynamic && k == 1 && contacts_.empty()) {
+    if (dynamic && k == 1 && contacts_.empty() && solver_.predictor != SolverOptions::Predictor::None) {
       x_ += solver_.dt * v_;
       if (solver_.predictor == SolverOptions::Predictor::ConstantAcceleration) x_ += solver_.dt * (v_ - v_previous_);
       // An instrument that moved in this step may touch the prediction: start at x_n then.

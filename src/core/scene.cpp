@@ -376,11 +376,12 @@ class Reader {
     check_keys(v, "solver", {"mode", "strategy", "predictor", "dt", "steps", "max_iterations", "tolerance",
                              "line_search", "rayleigh_mass", "rayleigh_stiffness"});
     if (v["strategy"]) o.strategy = strategy(v["strategy"], "solver.strategy");
-    if (v["predictor"])
-      o.predictor = word(v["predictor"], "solver.predictor", {"constant_velocity", "constant_acceleration"}) ==
-                            "constant_velocity"
-                        ? SolverOptions::Predictor::ConstantVelocity
-                        : SolverOptions::Predictor::ConstantAcceleration;
+    if (v["predictor"]) {
+      const std::string p = word(v["predictor"], "solver.predictor", {"none", "constant_velocity", "constant_acceleration"});
+      o.predictor = p == "none"                ? SolverOptions::Predictor::None
+                    : p == "constant_velocity" ? SolverOptions::Predictor::ConstantVelocity
+                                               : SolverOptions::Predictor::ConstantAcceleration;
+    }
     if (v["mode"])
       o.mode = word(v["mode"], "solver.mode", {"static", "dynamic"}) == "static" ? SolverOptions::Mode::Static
                                                                                 : SolverOptions::Mode::Dynamic;
