@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <array>
 #include <random>
 
 #include "liver_sim/corotational_tetra.h"
@@ -231,6 +232,68 @@ TEST(PolarRotation, WarmStartMatchesTheScaledIterationFromAnyGuess) {
     }
   }
   EXPECT_GT(checked, 200);
+}
+
+// Four elements at once against the warm iteration one by one: lanes whose guesses are near
+// (converged in the vectorized step), farther (continued alone), a half turn away (restarted
+// from F) and inverted, mixed in every call.
+TEST(PolarRotation, FourAtOnceMatchOneByOne) {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const std::array<double, 7> angles = {1e-9, 1e-7, 1e-4, 0.3, 3.1, 1e-8, 5e-6};
+  double worst = 0;
+  int lanes_converged_at_once = 0;
+  for (int call = 0; call < 60; ++call) {
+    std::array<Eigen::Matrix3d, 4> F, R;
+    std::array<Eigen::Quaterniond, 4> q, q_alone;
+    for (int l = 0; l < 4; ++l) {
+      Eigen::Matrix3d S;
+      for (int i = 0; i < 9; ++i) S(i / 3, i % 3) = u(rng);
+      S = (Eigen::Matrix3d::Identity() + 0.1 * (S + S.transpose())).eval();
+      F[l] = Eigen::AngleAxisd(3 * u(rng), Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized()).toRotationMatrix() * S;
+      if ((call + l) % 7 == 0) F[l].col(2) = -F[l].col(2) + 0.3 * F[l].col(0);  // inverted
+      const double angle = angles[(call + 3 * l) % angles.size()];
+      q[l] = Eigen::Quaterniond(polar_rotation(F[l]) *
+                                Eigen::AngleAxisd(angle, Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized()).toRotationMatrix());
+      q_alone[l] = q[l];
+      if (angle < 1e-5 && (call + l) % 7 != 0) ++lanes_converged_at_once;
+    }
+    polar_rotations(F, {&q[0], &q[1], &q[2], &q[3]}, R);
+    for (int l = 0; l < 4; ++l) {
+      const Eigen::Matrix3d expected = polar_rotation(F[l], q_alone[l]);
+      worst = std::max({worst, (R[l] - expected).cwiseAbs().maxCoeff(), (q[l].coeffs() - q_alone[l].coeffs()).cwiseAbs().maxCoeff()});
+    }
+  }
+  EXPECT_LE(worst, 1e-14);  // round-off: R^T F is summed in another order than Eigen's product
+  EXPECT_GT(lanes_converged_at_once, 40);
+}
+
+// Element forces four at a time against one at a time, on a rotated, deformed mesh whose element
+// count leaves a remainder.
+TEST(TetraRotation, FourAtOnceGiveTheSameForces) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(3, 1, 1));
+  CorotationalTetra block(mesh.V, mesh.T, material(RotationMethod::Polar));
+  CorotationalTetra single(mesh.V, mesh.T, material(RotationMethod::Polar));
+  ASSERT_NE(block.size() % 4, 0);
+  const Eigen::VectorXd X = flatten(mesh.V);
+  for (double amplitude : {0.0, 0.05}) {  // from the rest rotations, then warm from the first shape
+    const Eigen::VectorXd x = transform(X + random_field(X.size(), amplitude * kSize + 0.01 * kSize, 21), some_rotation(), Eigen::Vector3d::Zero());
+    for (int first = 0; first < block.size(); first += 4) {
+      std::array<Vector12d, 4> f;
+      const int count = std::min(4, block.size() - first);
+      const double energy = block.element_forces(first, count, x, f.data());
+      double energy_single = 0;
+      for (int i = 0; i < count; ++i) {
+        Vector12d expected;
+        energy_single += single.element_force(first + i, x, expected);
+        // A rotation that differs by round-off turns the whole shape, not only its strain.
+        const double scale = single.rest_stiffness(first + i).norm() * kSize;
+        ASSERT_LE((f[i] - expected).norm(), 1e-14 * scale) << "element " << first + i;
+        ASSERT_LE((block.rotation(first + i) - single.rotation(first + i)).cwiseAbs().maxCoeff(), 1e-14);
+      }
+      ASSERT_NEAR(energy, energy_single, 1e-14 * energy_single);
+    }
+  }
 }
 
 // A deformed shape spinning at a constant rate about a fixed axis: the predicted guesses are the

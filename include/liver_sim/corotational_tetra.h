@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <array>
 #include <vector>
 
 #include "liver_sim/options.h"
@@ -22,6 +23,10 @@ Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F);
 // The same, iterated from a nearby rotation q (the element's last one), which it updates:
 // about 3x faster when q is close, the same result to round-off.
 Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F, Eigen::Quaterniond& q);
+// The same for four elements at once, each from its own q: one step vectorized across them,
+// the iteration above for any that it leaves unconverged. Same results to round-off.
+void polar_rotations(const std::array<Eigen::Matrix3d, 4>& F, const std::array<Eigen::Quaterniond*, 4>& q,
+                     std::array<Eigen::Matrix3d, 4>& R);
 // d theta / d x (3 x 12): the spatial rotation increment of R = polar_rotation(F) per change of
 // the tetrahedron's 4 node positions, for F = [x1-x0, x2-x0, x3-x0] Dm_inv.
 Eigen::Matrix<double, 3, 12> polar_rotation_derivative(const Eigen::Matrix3d& R, const Eigen::Matrix3d& F,
@@ -52,6 +57,9 @@ class CorotationalTetra {
   // the element's rotation to x first. Returns the strain energy 1/2 u^T K0 u of the corotated
   // displacement (J).
   double element_force(int e, const Eigen::VectorXd& x, Vector12d& f);
+  // The same for elements first .. first + count - 1 (count <= 4), the polar rotations of four
+  // computed together; returns their summed energy.
+  double element_forces(int first, int count, const Eigen::VectorXd& x, Vector12d* f);
   // Tangent R K0 R^T with the rotation of the last update.
   void element_tangent(int e, Matrix12d& K) const;
   // R K0 R^T v_e for a given rotation R (a velocity v, 3 #V): the damping force b K v with the

@@ -2,6 +2,7 @@
 
 
 #include <algorithm>
+#include <array>
 #include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <Eigen/SVD>
@@ -135,20 +136,15 @@ Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F, Eigen::Quaterniond& q) 
     const double c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
     const double det = a00 * c00 + a01 * c01 + a02 * c02;
     if (!(a00 > 0 && a00 * a11 > a01 * a01 && det > 0)) break;
-    const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
-    const auto solve = [&](const Eigen::Vector3d& b) -> Eigen::Vector3d {  // A^-1 b by cofactors
-      return Eigen::Vector3d(c00 * b[0] + c01 * b[1] + c02 * b[2], c01 * b[0] + c11 * b[1] + c12 * b[2],
-                             c02 * b[0] + c12 * b[1] + c22 * b[2]) *
-             (1.0 / det);
-    };
-    const Eigen::Vector3d w1 = solve(a);
-    const double w2 = w1.squaredNorm();
-    if (!(w2 < 0.25)) break;
-    // The second-order terms of the skew part of exp(-w) G, (a x w + S w x w) / 2, evaluated at
-    // the first-order w: the error of the step falls from ~|w|^2 to ~|w|^3, so one iteration
+    // w = A^-1 a by cofactors. The quadratic terms of the skew part of exp(-w) G cancel (for
+    // symmetric S, a x w + S w x w = O(|w|^3)): one step leaves an error of ~|w|^3 / 3, so one
     // suffices for the changes between evaluations (|w| < 1e-5).
-    const Eigen::Matrix3d S = 0.5 * (G + G.transpose());
-    const Eigen::Vector3d w = solve(a + 0.5 * (a.cross(w1) + (S * w1).cross(w1)));
+    const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+    const Eigen::Vector3d w = Eigen::Vector3d(c00 * a[0] + c01 * a[1] + c02 * a[2], c01 * a[0] + c11 * a[1] + c12 * a[2],
+                                              c02 * a[0] + c12 * a[1] + c22 * a[2]) *
+                              (1.0 / det);
+    const double w2 = w.squaredNorm();
+    if (!(w2 < 0.25)) break;
     // q (1, w/2), back to unit length: the rotation exp(w) with an angle error of |w|^3 / 12.
     const Eigen::Vector3d h = 0.5 * w;
     const Eigen::Vector3d v = q.vec();
@@ -161,6 +157,72 @@ Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F, Eigen::Quaterniond& q) 
   const Eigen::Matrix3d R = polar_rotation(F);
   q = Eigen::Quaterniond(R);
   return R;
+}
+
+namespace {
+
+using Lanes = Eigen::Array4d;  // one value of four elements: SIMD across elements
+
+// The rotation matrix of unit quaternions (w, x, y, z), as Eigen's toRotationMatrix.
+void lane_rotation(const Lanes& w, const Lanes& x, const Lanes& y, const Lanes& z, Lanes (&r)[3][3]) {
+  const Lanes tx = 2 * x, ty = 2 * y, tz = 2 * z;
+  const Lanes twx = tx * w, twy = ty * w, twz = tz * w;
+  const Lanes txx = tx * x, txy = ty * x, txz = tz * x;
+  const Lanes tyy = ty * y, tyz = tz * y, tzz = tz * z;
+  r[0][0] = 1 - (tyy + tzz);
+  r[0][1] = txy - twz;
+  r[0][2] = txz + twy;
+  r[1][0] = txy + twz;
+  r[1][1] = 1 - (txx + tzz);
+  r[1][2] = tyz - twx;
+  r[2][0] = txz - twy;
+  r[2][1] = tyz + twx;
+  r[2][2] = 1 - (txx + tyy);
+}
+
+}  // namespace
+
+void polar_rotations(const std::array<Eigen::Matrix3d, 4>& F, const std::array<Eigen::Quaterniond*, 4>& q,
+                     std::array<Eigen::Matrix3d, 4>& R) {
+  // The first step of the warm iteration above, lane by lane (same formulas): a scalar step
+  // is a chain of dependent operations, four independent ones fill the vector units.
+  Lanes f[3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) f[i][j] = Lanes(F[0](i, j), F[1](i, j), F[2](i, j), F[3](i, j));
+  const Lanes qw(q[0]->w(), q[1]->w(), q[2]->w(), q[3]->w()), qx(q[0]->x(), q[1]->x(), q[2]->x(), q[3]->x()),
+      qy(q[0]->y(), q[1]->y(), q[2]->y(), q[3]->y()), qz(q[0]->z(), q[1]->z(), q[2]->z(), q[3]->z());
+  Lanes r[3][3], g[3][3];
+  lane_rotation(qw, qx, qy, qz, r);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) g[i][j] = r[0][i] * f[0][j] + r[1][i] * f[1][j] + r[2][i] * f[2][j];
+  const Lanes a0 = g[2][1] - g[1][2], a1 = g[0][2] - g[2][0], a2 = g[1][0] - g[0][1];
+  const Lanes trace = g[0][0] + g[1][1] + g[2][2];
+  const Lanes a00 = trace - g[0][0], a11 = trace - g[1][1], a22 = trace - g[2][2];
+  const Lanes a01 = -0.5 * (g[0][1] + g[1][0]), a02 = -0.5 * (g[0][2] + g[2][0]), a12 = -0.5 * (g[1][2] + g[2][1]);
+  const Lanes c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+  const Lanes det = a00 * c00 + a01 * c01 + a02 * c02;
+  const Lanes c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+  const Lanes inv_det = 1.0 / det;
+  const Lanes wx = (c00 * a0 + c01 * a1 + c02 * a2) * inv_det, wy = (c01 * a0 + c11 * a1 + c12 * a2) * inv_det,
+              wz = (c02 * a0 + c12 * a1 + c22 * a2) * inv_det;
+  const Lanes w2 = wx * wx + wy * wy + wz * wz;
+  const Lanes hx = 0.5 * wx, hy = 0.5 * wy, hz = 0.5 * wz;
+  const Lanes nx = qw * hx + qy * hz - qz * hy + qx, ny = qw * hy + qz * hx - qx * hz + qy,
+              nz = qw * hz + qx * hy - qy * hx + qz, nw = qw - (qx * hx + qy * hy + qz * hz);
+  const Lanes inv_norm = 1.0 / (nx * nx + ny * ny + nz * nz + nw * nw).sqrt();
+  const Lanes uw = nw * inv_norm, ux = nx * inv_norm, uy = ny * inv_norm, uz = nz * inv_norm;
+  lane_rotation(uw, ux, uy, uz, r);
+  for (int l = 0; l < 4; ++l) {
+    // A lane the step does not suit (see the scalar iteration) or does not converge goes on alone.
+    const bool ok = a00[l] > 0 && a00[l] * a11[l] > a01[l] * a01[l] && det[l] > 0 && w2[l] < 0.25;
+    if (ok) *q[l] = Eigen::Quaterniond(uw[l], ux[l], uy[l], uz[l]);
+    if (ok && w2[l] < 1e-10) {
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) R[l](i, j) = r[i][j][l];
+    } else {
+      R[l] = polar_rotation(F[l], *q[l]);
+    }
+  }
 }
 
 Eigen::Matrix3d cross_matrix(const Eigen::Vector3d& w) {
@@ -244,6 +306,28 @@ double CorotationalTetra::element_force(int e, const Eigen::VectorXd& x, Vector1
   const Eigen::Matrix3d stress = rotated_stress(G);
   nodal_forces(e, R * stress, f);
   return 0.5 * volume_[e] * (stress.cwiseProduct(G)).sum();
+}
+
+double CorotationalTetra::element_forces(int first, int count, const Eigen::VectorXd& x, Vector12d* f) {
+  if (count < 4 || method_ != RotationMethod::Polar) {
+    double energy = 0;
+    for (int i = 0; i < count; ++i) energy += element_force(first + i, x, f[i]);
+    return energy;
+  }
+  std::array<Eigen::Matrix3d, 4> F, R;
+  for (int i = 0; i < 4; ++i) F[i] = deformation_gradient(first + i, x);
+  polar_rotations(F, {&q_[first], &q_[first + 1], &q_[first + 2], &q_[first + 3]}, R);
+  double energy = 0;
+  for (int i = 0; i < 4; ++i) {
+    const int e = first + i;
+    R_[e] = R[i];
+    Eigen::Matrix3d G = R[i].transpose() * F[i];
+    G.diagonal().array() -= 1.0;
+    const Eigen::Matrix3d stress = rotated_stress(G);
+    nodal_forces(e, R[i] * stress, f[i]);
+    energy += 0.5 * volume_[e] * (stress.cwiseProduct(G)).sum();
+  }
+  return energy;
 }
 
 void CorotationalTetra::tangent_product(int e, const Eigen::Matrix3d& R, const Eigen::VectorXd& v, Vector12d& out) const {
