@@ -268,8 +268,8 @@ TEST(PolarRotation, FourAtOnceMatchOneByOne) {
   EXPECT_GT(lanes_converged_at_once, 40);
 }
 
-// Element forces four at a time against one at a time, on a rotated, deformed mesh whose element
-// count leaves a remainder.
+// Element forces and damping products four at a time against one at a time, on a rotated,
+// deformed mesh whose element count leaves a remainder.
 TEST(TetraRotation, FourAtOnceGiveTheSameForces) {
   const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(3, 1, 1));
   CorotationalTetra block(mesh.V, mesh.T, material(RotationMethod::Polar));
@@ -292,6 +292,18 @@ TEST(TetraRotation, FourAtOnceGiveTheSameForces) {
         ASSERT_LE((block.rotation(first + i) - single.rotation(first + i)).cwiseAbs().maxCoeff(), 1e-14);
       }
       ASSERT_NEAR(energy, energy_single, 1e-14 * energy_single);
+    }
+  }
+  // The damping products with the rotations just computed, on a velocity field.
+  const Eigen::VectorXd v = random_field(X.size(), 1.0, 22);
+  for (int first = 0; first < block.size(); first += 4) {
+    std::array<Vector12d, 4> out;
+    const int count = std::min(4, block.size() - first);
+    block.tangent_products(first, count, block.rotations(), v, out.data());
+    for (int i = 0; i < count; ++i) {
+      Vector12d expected;
+      block.tangent_product(first + i, block.rotation(first + i), v, expected);
+      ASSERT_LE((out[i] - expected).norm(), 1e-14 * expected.norm()) << "element " << first + i;
     }
   }
 }

@@ -15,6 +15,16 @@ namespace liver_sim {
 using Matrix12d = Eigen::Matrix<double, 12, 12>;
 using Vector12d = Eigen::Matrix<double, 12, 1>;
 
+// One value of each of four elements, and one 3x3 matrix of each: the element kernels run on
+// four elements at once, vectorized across them (each element's own arithmetic is a chain of
+// dependent operations that leaves the vector units idle).
+using Lanes = Eigen::Array4d;
+struct LaneMatrix {
+  Lanes m[3][3];
+  Lanes& operator()(int i, int j) { return m[i][j]; }
+  const Lanes& operator()(int i, int j) const { return m[i][j]; }
+};
+
 // The matrix of w x . (cross product with w).
 Eigen::Matrix3d cross_matrix(const Eigen::Vector3d& w);
 
@@ -65,6 +75,9 @@ class CorotationalTetra {
   // R K0 R^T v_e for a given rotation R (a velocity v, 3 #V): the damping force b K v with the
   // stiffness of an earlier state, without assembling it.
   void tangent_product(int e, const Eigen::Matrix3d& R, const Eigen::VectorXd& v, Vector12d& out) const;
+  // The same for elements first .. first + count - 1 (count <= 4), R indexed by element.
+  void tangent_products(int first, int count, const std::vector<Eigen::Matrix3d>& R, const Eigen::VectorXd& v,
+                        Vector12d* out) const;
 
   // Rotation of element e from the last update; rest stiffness; rest volume (m^3).
   const Eigen::Matrix3d& rotation(int e) const { return R_[e]; }
@@ -90,6 +103,11 @@ class CorotationalTetra {
   Eigen::Matrix3d rotated_stress(const Eigen::Matrix3d& G) const;
   // Nodal forces V P g_a of a stress P in world axes.
   void nodal_forces(int e, const Eigen::Matrix3d& P, Vector12d& f) const;
+  // Four at once, from element first (a multiple of 4): F = Ds Dm^-1 of positions (or
+  // velocities) x; the forces V R sigma(G) g_a of a gradient G in the elements' frames, returning
+  // the energies 1/2 V sigma : G.
+  LaneMatrix lane_gradient(int first, const Eigen::VectorXd& x) const;
+  Lanes lane_forces(int first, const LaneMatrix& R, const LaneMatrix& G, Vector12d* f) const;
 
   Eigen::MatrixX4i T_;
   RotationMethod method_;
@@ -97,6 +115,11 @@ class CorotationalTetra {
   std::vector<Eigen::Matrix3d> rest_frame_T_;   // transposed edge frame of the rest shape
   std::vector<Eigen::Matrix<double, 4, 3>> grad_N_;  // shape-function gradients (1/m)
   std::vector<double> volume_;
+  struct Block {  // Dm_inv_ and volume_ of elements 4 b .. 4 b + 3, side by side
+    LaneMatrix Dm_inv;
+    Lanes volume;
+  };
+  std::vector<Block> blocks_;
   std::vector<Matrix12d> K0_;  // for the tangent; forces use the stress (rotated_stress)
   double lambda_ = 0, mu_ = 0;   // Lame parameters (Pa)
   std::vector<Eigen::Matrix3d> R_;

@@ -24,6 +24,102 @@ Eigen::Matrix3d edge_frame(const Eigen::Vector3d& e01, const Eigen::Vector3d& e0
 
 }  // namespace
 
+namespace {
+
+LaneMatrix lanes_of(const std::array<const Eigen::Matrix3d*, 4>& A) {
+  LaneMatrix L;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) L(i, j) = Lanes((*A[0])(i, j), (*A[1])(i, j), (*A[2])(i, j), (*A[3])(i, j));
+  return L;
+}
+
+Eigen::Matrix3d lane(const LaneMatrix& L, int l) {
+  Eigen::Matrix3d A;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) A(i, j) = L(i, j)[l];
+  return A;
+}
+
+void set_lane(LaneMatrix& L, int l, const Eigen::Matrix3d& A) {
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) L(i, j)[l] = A(i, j);
+}
+
+// A B, A^T B and A B^T.
+LaneMatrix product(const LaneMatrix& A, const LaneMatrix& B) {
+  LaneMatrix C;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) C(i, j) = A(i, 0) * B(0, j) + A(i, 1) * B(1, j) + A(i, 2) * B(2, j);
+  return C;
+}
+
+LaneMatrix transpose_product(const LaneMatrix& A, const LaneMatrix& B) {
+  LaneMatrix C;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) C(i, j) = A(0, i) * B(0, j) + A(1, i) * B(1, j) + A(2, i) * B(2, j);
+  return C;
+}
+
+LaneMatrix product_transpose(const LaneMatrix& A, const LaneMatrix& B) {
+  LaneMatrix C;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) C(i, j) = A(i, 0) * B(j, 0) + A(i, 1) * B(j, 1) + A(i, 2) * B(j, 2);
+  return C;
+}
+
+// The rotation matrix of unit quaternions (w, x, y, z), as Eigen's toRotationMatrix.
+LaneMatrix lane_rotation(const Lanes& w, const Lanes& x, const Lanes& y, const Lanes& z) {
+  const Lanes tx = 2 * x, ty = 2 * y, tz = 2 * z;
+  const Lanes twx = tx * w, twy = ty * w, twz = tz * w;
+  const Lanes txx = tx * x, txy = ty * x, txz = tz * x;
+  const Lanes tyy = ty * y, tyz = tz * y, tzz = tz * z;
+  LaneMatrix r;
+  r(0, 0) = 1 - (tyy + tzz);
+  r(0, 1) = txy - twz;
+  r(0, 2) = txz + twy;
+  r(1, 0) = txy + twz;
+  r(1, 1) = 1 - (txx + tzz);
+  r(1, 2) = tyz - twx;
+  r(2, 0) = txz - twy;
+  r(2, 1) = tyz + twx;
+  r(2, 2) = 1 - (txx + tyy);
+  return r;
+}
+
+// The first step of the warm iteration above, lane by lane (same formulas): a scalar step is a
+// chain of dependent operations, four independent ones fill the vector units. A lane the step
+// does not suit, or does not converge, goes on alone.
+LaneMatrix polar_lanes(const LaneMatrix& F, const std::array<Eigen::Quaterniond*, 4>& q) {
+  const Lanes qw(q[0]->w(), q[1]->w(), q[2]->w(), q[3]->w()), qx(q[0]->x(), q[1]->x(), q[2]->x(), q[3]->x()),
+      qy(q[0]->y(), q[1]->y(), q[2]->y(), q[3]->y()), qz(q[0]->z(), q[1]->z(), q[2]->z(), q[3]->z());
+  const LaneMatrix G = transpose_product(lane_rotation(qw, qx, qy, qz), F);
+  const Lanes a0 = G(2, 1) - G(1, 2), a1 = G(0, 2) - G(2, 0), a2 = G(1, 0) - G(0, 1);
+  const Lanes trace = G(0, 0) + G(1, 1) + G(2, 2);
+  const Lanes a00 = trace - G(0, 0), a11 = trace - G(1, 1), a22 = trace - G(2, 2);
+  const Lanes a01 = -0.5 * (G(0, 1) + G(1, 0)), a02 = -0.5 * (G(0, 2) + G(2, 0)), a12 = -0.5 * (G(1, 2) + G(2, 1));
+  const Lanes c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+  const Lanes det = a00 * c00 + a01 * c01 + a02 * c02;
+  const Lanes c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+  const Lanes inv_det = 1.0 / det;
+  const Lanes wx = (c00 * a0 + c01 * a1 + c02 * a2) * inv_det, wy = (c01 * a0 + c11 * a1 + c12 * a2) * inv_det,
+              wz = (c02 * a0 + c12 * a1 + c22 * a2) * inv_det;
+  const Lanes w2 = wx * wx + wy * wy + wz * wz;
+  const Lanes hx = 0.5 * wx, hy = 0.5 * wy, hz = 0.5 * wz;
+  const Lanes nx = qw * hx + qy * hz - qz * hy + qx, ny = qw * hy + qz * hx - qx * hz + qy,
+              nz = qw * hz + qx * hy - qy * hx + qz, nw = qw - (qx * hx + qy * hy + qz * hz);
+  const Lanes inv_norm = 1.0 / (nx * nx + ny * ny + nz * nz + nw * nw).sqrt();
+  const Lanes uw = nw * inv_norm, ux = nx * inv_norm, uy = ny * inv_norm, uz = nz * inv_norm;
+  LaneMatrix R = lane_rotation(uw, ux, uy, uz);
+  for (int l = 0; l < 4; ++l) {
+    const bool ok = a00[l] > 0 && a00[l] * a11[l] > a01[l] * a01[l] && det[l] > 0 && w2[l] < 0.25;
+    if (ok) *q[l] = Eigen::Quaterniond(uw[l], ux[l], uy[l], uz[l]);
+    if (!(ok && w2[l] < 1e-10)) set_lane(R, l, polar_rotation(lane(F, l), *q[l]));
+  }
+  return R;
+}
+
+}  // namespace
+
 CorotationalTetra::CorotationalTetra(const Eigen::MatrixX3d& X, const Eigen::MatrixX4i& T,
                                      const ParenchymaOptions& material)
     : T_(T), method_(material.rotation) {
@@ -44,6 +140,12 @@ CorotationalTetra::CorotationalTetra(const Eigen::MatrixX3d& X, const Eigen::Mat
     // Rows of Dm^-1 are the gradients of N1..N3; N0 = 1 - N1 - N2 - N3.
     grad_N_[e].bottomRows<3>() = Dm_inv_[e];
     grad_N_[e].row(0) = -Dm_inv_[e].colwise().sum();
+  }
+  blocks_.resize(n / 4);
+  for (int b = 0; b < n / 4; ++b) {
+    const int e = 4 * b;
+    blocks_[b].Dm_inv = lanes_of({&Dm_inv_[e], &Dm_inv_[e + 1], &Dm_inv_[e + 2], &Dm_inv_[e + 3]});
+    blocks_[b].volume = Lanes(volume_[e], volume_[e + 1], volume_[e + 2], volume_[e + 3]);
   }
   set_material(material);
 }
@@ -159,70 +261,10 @@ Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F, Eigen::Quaterniond& q) 
   return R;
 }
 
-namespace {
-
-using Lanes = Eigen::Array4d;  // one value of four elements: SIMD across elements
-
-// The rotation matrix of unit quaternions (w, x, y, z), as Eigen's toRotationMatrix.
-void lane_rotation(const Lanes& w, const Lanes& x, const Lanes& y, const Lanes& z, Lanes (&r)[3][3]) {
-  const Lanes tx = 2 * x, ty = 2 * y, tz = 2 * z;
-  const Lanes twx = tx * w, twy = ty * w, twz = tz * w;
-  const Lanes txx = tx * x, txy = ty * x, txz = tz * x;
-  const Lanes tyy = ty * y, tyz = tz * y, tzz = tz * z;
-  r[0][0] = 1 - (tyy + tzz);
-  r[0][1] = txy - twz;
-  r[0][2] = txz + twy;
-  r[1][0] = txy + twz;
-  r[1][1] = 1 - (txx + tzz);
-  r[1][2] = tyz - twx;
-  r[2][0] = txz - twy;
-  r[2][1] = tyz + twx;
-  r[2][2] = 1 - (txx + tyy);
-}
-
-}  // namespace
-
 void polar_rotations(const std::array<Eigen::Matrix3d, 4>& F, const std::array<Eigen::Quaterniond*, 4>& q,
                      std::array<Eigen::Matrix3d, 4>& R) {
-  // The first step of the warm iteration above, lane by lane (same formulas): a scalar step
-  // is a chain of dependent operations, four independent ones fill the vector units.
-  Lanes f[3][3];
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) f[i][j] = Lanes(F[0](i, j), F[1](i, j), F[2](i, j), F[3](i, j));
-  const Lanes qw(q[0]->w(), q[1]->w(), q[2]->w(), q[3]->w()), qx(q[0]->x(), q[1]->x(), q[2]->x(), q[3]->x()),
-      qy(q[0]->y(), q[1]->y(), q[2]->y(), q[3]->y()), qz(q[0]->z(), q[1]->z(), q[2]->z(), q[3]->z());
-  Lanes r[3][3], g[3][3];
-  lane_rotation(qw, qx, qy, qz, r);
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) g[i][j] = r[0][i] * f[0][j] + r[1][i] * f[1][j] + r[2][i] * f[2][j];
-  const Lanes a0 = g[2][1] - g[1][2], a1 = g[0][2] - g[2][0], a2 = g[1][0] - g[0][1];
-  const Lanes trace = g[0][0] + g[1][1] + g[2][2];
-  const Lanes a00 = trace - g[0][0], a11 = trace - g[1][1], a22 = trace - g[2][2];
-  const Lanes a01 = -0.5 * (g[0][1] + g[1][0]), a02 = -0.5 * (g[0][2] + g[2][0]), a12 = -0.5 * (g[1][2] + g[2][1]);
-  const Lanes c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
-  const Lanes det = a00 * c00 + a01 * c01 + a02 * c02;
-  const Lanes c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
-  const Lanes inv_det = 1.0 / det;
-  const Lanes wx = (c00 * a0 + c01 * a1 + c02 * a2) * inv_det, wy = (c01 * a0 + c11 * a1 + c12 * a2) * inv_det,
-              wz = (c02 * a0 + c12 * a1 + c22 * a2) * inv_det;
-  const Lanes w2 = wx * wx + wy * wy + wz * wz;
-  const Lanes hx = 0.5 * wx, hy = 0.5 * wy, hz = 0.5 * wz;
-  const Lanes nx = qw * hx + qy * hz - qz * hy + qx, ny = qw * hy + qz * hx - qx * hz + qy,
-              nz = qw * hz + qx * hy - qy * hx + qz, nw = qw - (qx * hx + qy * hy + qz * hz);
-  const Lanes inv_norm = 1.0 / (nx * nx + ny * ny + nz * nz + nw * nw).sqrt();
-  const Lanes uw = nw * inv_norm, ux = nx * inv_norm, uy = ny * inv_norm, uz = nz * inv_norm;
-  lane_rotation(uw, ux, uy, uz, r);
-  for (int l = 0; l < 4; ++l) {
-    // A lane the step does not suit (see the scalar iteration) or does not converge goes on alone.
-    const bool ok = a00[l] > 0 && a00[l] * a11[l] > a01[l] * a01[l] && det[l] > 0 && w2[l] < 0.25;
-    if (ok) *q[l] = Eigen::Quaterniond(uw[l], ux[l], uy[l], uz[l]);
-    if (ok && w2[l] < 1e-10) {
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) R[l](i, j) = r[i][j][l];
-    } else {
-      R[l] = polar_rotation(F[l], *q[l]);
-    }
-  }
+  const LaneMatrix rotations = polar_lanes(lanes_of({&F[0], &F[1], &F[2], &F[3]}), q);
+  for (int l = 0; l < 4; ++l) R[l] = lane(rotations, l);
 }
 
 Eigen::Matrix3d cross_matrix(const Eigen::Vector3d& w) {
@@ -308,26 +350,60 @@ double CorotationalTetra::element_force(int e, const Eigen::VectorXd& x, Vector1
   return 0.5 * volume_[e] * (stress.cwiseProduct(G)).sum();
 }
 
+LaneMatrix CorotationalTetra::lane_gradient(int first, const Eigen::VectorXd& x) const {
+  LaneMatrix Ds;
+  for (int l = 0; l < 4; ++l) {
+    const Eigen::Vector3d x0 = node(x, T_(first + l, 0));
+    for (int j = 0; j < 3; ++j) {
+      const Eigen::Vector3d edge = node(x, T_(first + l, j + 1)) - x0;
+      for (int i = 0; i < 3; ++i) Ds(i, j)[l] = edge[i];
+    }
+  }
+  return product(Ds, blocks_[first / 4].Dm_inv);
+}
+
+Lanes CorotationalTetra::lane_forces(int first, const LaneMatrix& R, const LaneMatrix& G, Vector12d* f) const {
+  // As element_force: the stress of the gradient G in the elements' frames, then V R sigma g_a.
+  const Block& block = blocks_[first / 4];
+  const Lanes trace = G(0, 0) + G(1, 1) + G(2, 2);
+  LaneMatrix stress;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) stress(i, j) = mu_ * (G(i, j) + G(j, i));
+  for (int i = 0; i < 3; ++i) stress(i, i) += lambda_ * trace;
+  const LaneMatrix fs = product_transpose(product(R, stress), block.Dm_inv);
+  for (int l = 0; l < 4; ++l) {
+    for (int a = 1; a < 4; ++a)
+      for (int i = 0; i < 3; ++i) f[l][3 * a + i] = block.volume[l] * fs(i, a - 1)[l];
+    f[l].head<3>() = -(f[l].segment<3>(3) + f[l].segment<3>(6) + f[l].segment<3>(9));
+  }
+  Lanes work = Lanes::Zero();
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) work += stress(i, j) * G(i, j);
+  return 0.5 * block.volume * work;
+}
+
 double CorotationalTetra::element_forces(int first, int count, const Eigen::VectorXd& x, Vector12d* f) {
   if (count < 4 || method_ != RotationMethod::Polar) {
     double energy = 0;
     for (int i = 0; i < count; ++i) energy += element_force(first + i, x, f[i]);
     return energy;
   }
-  std::array<Eigen::Matrix3d, 4> F, R;
-  for (int i = 0; i < 4; ++i) F[i] = deformation_gradient(first + i, x);
-  polar_rotations(F, {&q_[first], &q_[first + 1], &q_[first + 2], &q_[first + 3]}, R);
-  double energy = 0;
-  for (int i = 0; i < 4; ++i) {
-    const int e = first + i;
-    R_[e] = R[i];
-    Eigen::Matrix3d G = R[i].transpose() * F[i];
-    G.diagonal().array() -= 1.0;
-    const Eigen::Matrix3d stress = rotated_stress(G);
-    nodal_forces(e, R[i] * stress, f[i]);
-    energy += 0.5 * volume_[e] * (stress.cwiseProduct(G)).sum();
+  const LaneMatrix F = lane_gradient(first, x);
+  const LaneMatrix R = polar_lanes(F, {&q_[first], &q_[first + 1], &q_[first + 2], &q_[first + 3]});
+  for (int l = 0; l < 4; ++l) R_[first + l] = lane(R, l);
+  LaneMatrix G = transpose_product(R, F);
+  for (int i = 0; i < 3; ++i) G(i, i) -= 1.0;  // R^T F - I: the displacement gradient in the elements' frames
+  return lane_forces(first, R, G, f).sum();
+}
+
+void CorotationalTetra::tangent_products(int first, int count, const std::vector<Eigen::Matrix3d>& R,
+                                         const Eigen::VectorXd& v, Vector12d* out) const {
+  if (count < 4) {
+    for (int i = 0; i < count; ++i) tangent_product(first + i, R[first + i], v, out[i]);
+    return;
   }
-  return energy;
+  const LaneMatrix rotation = lanes_of({&R[first], &R[first + 1], &R[first + 2], &R[first + 3]});
+  lane_forces(first, rotation, transpose_product(rotation, lane_gradient(first, v)), out);
 }
 
 void CorotationalTetra::tangent_product(int e, const Eigen::Matrix3d& R, const Eigen::VectorXd& v, Vector12d& out) const {

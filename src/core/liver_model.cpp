@@ -605,11 +605,14 @@ void LiverModel::damping_forces(const Eigen::VectorXd& v, Eigen::VectorXd& f) {
     const int thread = omp_get_thread_num();
     Eigen::VectorXd& ft = thread == 0 ? f : thread_forces_[thread];
     if (thread > 0) ft.setZero(v.size());
-    Vector12d fe;
+    Vector12d fe[4];
+    const int tetrahedra = tetra_.size();
 #pragma omp for schedule(static) nowait
-    for (int e = 0; e < tetra_.size(); ++e) {
-      tetra_.tangent_product(e, damping_.tet_rotation[e], v, fe);
-      for (int k = 0; k < 4; ++k) ft.segment<3>(3 * mesh_.T(e, k)) += fe.segment<3>(3 * k);
+    for (int block = 0; block < (tetrahedra + 3) / 4; ++block) {
+      const int first = 4 * block, count = std::min(4, tetrahedra - first);
+      tetra_.tangent_products(first, count, damping_.tet_rotation, v, fe);
+      for (int i = 0; i < count; ++i)
+        for (int k = 0; k < 4; ++k) ft.segment<3>(3 * mesh_.T(first + i, k)) += fe[i].segment<3>(3 * k);
     }
     if (capsule_.enabled) {
       Vector9d fm;
