@@ -86,35 +86,50 @@ LaneMatrix lane_rotation(const Lanes& w, const Lanes& x, const Lanes& y, const L
   return r;
 }
 
-// The first step of the warm iteration above, lane by lane (same formulas): a scalar step is a
-// chain of dependent operations, four independent ones fill the vector units. A lane the step
-// does not suit, or does not converge, goes on alone.
+// The warm iteration above, lane by lane (same formulas): a scalar step is a chain of dependent
+// operations, four independent ones fill the vector units. Two steps in lanes cover the usual
+// changes between evaluations; a lane the step does not suit, or that needs more, goes on alone.
 LaneMatrix polar_lanes(const LaneMatrix& F, const std::array<Eigen::Quaterniond*, 4>& q) {
-  const Lanes qw(q[0]->w(), q[1]->w(), q[2]->w(), q[3]->w()), qx(q[0]->x(), q[1]->x(), q[2]->x(), q[3]->x()),
+  Lanes qw(q[0]->w(), q[1]->w(), q[2]->w(), q[3]->w()), qx(q[0]->x(), q[1]->x(), q[2]->x(), q[3]->x()),
       qy(q[0]->y(), q[1]->y(), q[2]->y(), q[3]->y()), qz(q[0]->z(), q[1]->z(), q[2]->z(), q[3]->z());
-  const LaneMatrix G = transpose_product(lane_rotation(qw, qx, qy, qz), F);
-  const Lanes a0 = G(2, 1) - G(1, 2), a1 = G(0, 2) - G(2, 0), a2 = G(1, 0) - G(0, 1);
-  const Lanes trace = G(0, 0) + G(1, 1) + G(2, 2);
-  const Lanes a00 = trace - G(0, 0), a11 = trace - G(1, 1), a22 = trace - G(2, 2);
-  const Lanes a01 = -0.5 * (G(0, 1) + G(1, 0)), a02 = -0.5 * (G(0, 2) + G(2, 0)), a12 = -0.5 * (G(1, 2) + G(2, 1));
-  const Lanes c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
-  const Lanes det = a00 * c00 + a01 * c01 + a02 * c02;
-  const Lanes c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
-  const Lanes inv_det = 1.0 / det;
-  const Lanes wx = (c00 * a0 + c01 * a1 + c02 * a2) * inv_det, wy = (c01 * a0 + c11 * a1 + c12 * a2) * inv_det,
-              wz = (c02 * a0 + c12 * a1 + c22 * a2) * inv_det;
-  const Lanes w2 = wx * wx + wy * wy + wz * wz;
-  const Lanes hx = 0.5 * wx, hy = 0.5 * wy, hz = 0.5 * wz;
-  const Lanes nx = qw * hx + qy * hz - qz * hy + qx, ny = qw * hy + qz * hx - qx * hz + qy,
-              nz = qw * hz + qx * hy - qy * hx + qz, nw = qw - (qx * hx + qy * hy + qz * hz);
-  const Lanes inv_norm = 1.0 / (nx * nx + ny * ny + nz * nz + nw * nw).sqrt();
-  const Lanes uw = nw * inv_norm, ux = nx * inv_norm, uy = ny * inv_norm, uz = nz * inv_norm;
-  LaneMatrix R = lane_rotation(uw, ux, uy, uz);
-  for (int l = 0; l < 4; ++l) {
-    const bool ok = a00[l] > 0 && a00[l] * a11[l] > a01[l] * a01[l] && det[l] > 0 && w2[l] < 0.25;
-    if (ok) *q[l] = Eigen::Quaterniond(uw[l], ux[l], uy[l], uz[l]);
-    if (!(ok && w2[l] < 1e-10)) set_lane(R, l, polar_rotation(lane(F, l), *q[l]));
+  LaneMatrix R;
+  std::array<bool, 4> converged{}, alone{};
+  for (int step = 0; step < 2; ++step) {
+    const LaneMatrix G = transpose_product(lane_rotation(qw, qx, qy, qz), F);
+    const Lanes a0 = G(2, 1) - G(1, 2), a1 = G(0, 2) - G(2, 0), a2 = G(1, 0) - G(0, 1);
+    const Lanes trace = G(0, 0) + G(1, 1) + G(2, 2);
+    const Lanes a00 = trace - G(0, 0), a11 = trace - G(1, 1), a22 = trace - G(2, 2);
+    const Lanes a01 = -0.5 * (G(0, 1) + G(1, 0)), a02 = -0.5 * (G(0, 2) + G(2, 0)), a12 = -0.5 * (G(1, 2) + G(2, 1));
+    const Lanes c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+    const Lanes det = a00 * c00 + a01 * c01 + a02 * c02;
+    const Lanes c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+    const Lanes inv_det = 1.0 / det;
+    const Lanes wx = (c00 * a0 + c01 * a1 + c02 * a2) * inv_det, wy = (c01 * a0 + c11 * a1 + c12 * a2) * inv_det,
+                wz = (c02 * a0 + c12 * a1 + c22 * a2) * inv_det;
+    const Lanes w2 = wx * wx + wy * wy + wz * wz;
+    const Lanes hx = 0.5 * wx, hy = 0.5 * wy, hz = 0.5 * wz;
+    const Lanes nx = qw * hx + qy * hz - qz * hy + qx, ny = qw * hy + qz * hx - qx * hz + qy,
+                nz = qw * hz + qx * hy - qy * hx + qz, nw = qw - (qx * hx + qy * hy + qz * hz);
+    const Lanes inv_norm = 1.0 / (nx * nx + ny * ny + nz * nz + nw * nw).sqrt();
+    qw = nw * inv_norm;
+    qx = nx * inv_norm;
+    qy = ny * inv_norm;
+    qz = nz * inv_norm;
+    const LaneMatrix R_step = lane_rotation(qw, qx, qy, qz);
+    bool more = false;
+    for (int l = 0; l < 4; ++l) {
+      if (converged[l] || alone[l]) continue;
+      alone[l] = !(a00[l] > 0 && a00[l] * a11[l] > a01[l] * a01[l] && det[l] > 0 && w2[l] < 0.25);
+      if (alone[l]) continue;
+      *q[l] = Eigen::Quaterniond(qw[l], qx[l], qy[l], qz[l]);
+      converged[l] = w2[l] < 1e-10;
+      if (converged[l]) set_lane(R, l, lane(R_step, l));
+      more = more || !converged[l];
+    }
+    if (!more) break;
   }
+  for (int l = 0; l < 4; ++l)
+    if (!converged[l]) set_lane(R, l, polar_rotation(lane(F, l), *q[l]));
   return R;
 }
 
