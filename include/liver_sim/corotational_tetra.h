@@ -33,8 +33,8 @@ Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F);
 // The same, iterated from a nearby rotation q (the element's last one), which it updates:
 // about 3x faster when q is close, the same result to round-off.
 Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F, Eigen::Quaterniond& q);
-// The same for four elements at once, each from its own q: one step vectorized across them,
-// the iteration above for any that it leaves unconverged. Same results to round-off.
+// The same for four elements at once, each from its own q: up to two steps vectorized across
+// them, the iteration above for any that they leave unconverged. Same results to round-off.
 void polar_rotations(const std::array<Eigen::Matrix3d, 4>& F, const std::array<Eigen::Quaterniond*, 4>& q,
                      std::array<Eigen::Matrix3d, 4>& R);
 // d theta / d x (3 x 12): the spatial rotation increment of R = polar_rotation(F) per change of
@@ -67,15 +67,15 @@ class CorotationalTetra {
   // the element's rotation to x first. Returns the strain energy 1/2 u^T K0 u of the corotated
   // displacement (J).
   double element_force(int e, const Eigen::VectorXd& x, Vector12d& f);
-  // The same for elements first .. first + count - 1 (count <= 4), the polar rotations of four
-  // computed together; returns their summed energy.
+  // The same for elements first .. first + count - 1 (count <= 4), four at once from a multiple
+  // of 4 (one at a time otherwise); returns their summed energy.
   double element_forces(int first, int count, const Eigen::VectorXd& x, Vector12d* f);
   // Tangent R K0 R^T with the rotation of the last update.
   void element_tangent(int e, Matrix12d& K) const;
   // R K0 R^T v_e for a given rotation R (a velocity v, 3 #V): the damping force b K v with the
   // stiffness of an earlier state, without assembling it.
   void tangent_product(int e, const Eigen::Matrix3d& R, const Eigen::VectorXd& v, Vector12d& out) const;
-  // The same for elements first .. first + count - 1 (count <= 4), R indexed by element.
+  // The same for elements first .. first + count - 1 (as element_forces), R indexed by element.
   void tangent_products(int first, int count, const std::vector<Eigen::Matrix3d>& R, const Eigen::VectorXd& v,
                         Vector12d* out) const;
 

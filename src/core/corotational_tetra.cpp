@@ -398,7 +398,7 @@ Lanes CorotationalTetra::lane_forces(int first, const LaneMatrix& R, const LaneM
 }
 
 double CorotationalTetra::element_forces(int first, int count, const Eigen::VectorXd& x, Vector12d* f) {
-  if (count < 4 || method_ != RotationMethod::Polar) {
+  if (count < 4 || first % 4 != 0 || method_ != RotationMethod::Polar) {
     double energy = 0;
     for (int i = 0; i < count; ++i) energy += element_force(first + i, x, f[i]);
     return energy;
@@ -413,7 +413,7 @@ double CorotationalTetra::element_forces(int first, int count, const Eigen::Vect
 
 void CorotationalTetra::tangent_products(int first, int count, const std::vector<Eigen::Matrix3d>& R,
                                          const Eigen::VectorXd& v, Vector12d* out) const {
-  if (count < 4) {
+  if (count < 4 || first % 4 != 0) {
     for (int i = 0; i < count; ++i) tangent_product(first + i, R[first + i], v, out[i]);
     return;
   }
