@@ -438,6 +438,43 @@ TEST(MembranePatch, InPlaneAffineFieldGivesConstantStrainAndZeroInteriorResidual
   EXPECT_LE(interior_max, 1e-9 * f.cwiseAbs().maxCoeff());
 }
 
+// The frames (four triangles at a time, and the remainder one by one) are the polar rotation of
+// each triangle's in-plane gradient: orthonormal, in the current plane, and turning the gradient
+// into a symmetric stretch. A flattened triangle gets a finite frame.
+TEST(MembraneRotation, FramesAreThePolarRotationOfTheInPlaneGradient) {
+  const TetMesh mesh = make_box_mesh(Eigen::Vector3d::Constant(kSize), Eigen::Vector3i(2, 2, 1));
+  const Eigen::MatrixX3i all = boundary_triangles(mesh.T);
+  const Eigen::MatrixX3i F = all.topRows(all.rows() - 2);  // a box's boundary count is a multiple of 4
+  ASSERT_NE(F.rows() % 4, 0);
+  MembraneCST m(mesh.V, F, capsule());
+  const Eigen::VectorXd X = flatten(mesh.V);
+  m.update_rotations(X);
+  const std::vector<Eigen::Matrix<double, 3, 2>> rest = m.frames();  // the rest axes
+  Eigen::VectorXd x = transform(X + random_field(X.size(), 0.1 * kSize, 31), some_rotation(), Eigen::Vector3d::Zero());
+  const int flat = 5;  // node 1 of triangle 5 moved onto node 0
+  x.segment<3>(3 * F(flat, 1)) = x.segment<3>(3 * F(flat, 0));
+  m.update_rotations(x);
+  const auto edges = [&](const Eigen::VectorXd& y, int e) {
+    Eigen::Matrix<double, 3, 2> D;
+    D << y.segment<3>(3 * F(e, 1)) - y.segment<3>(3 * F(e, 0)), y.segment<3>(3 * F(e, 2)) - y.segment<3>(3 * F(e, 0));
+    return D;
+  };
+  for (int e = 0; e < m.size(); ++e) {
+    const Eigen::Matrix<double, 3, 2>& A = m.frames()[e];
+    if (e == flat || (F.row(e).array() == F(flat, 1)).any()) {
+      ASSERT_TRUE(A.allFinite()) << "triangle " << e;
+      continue;
+    }
+    const Eigen::Matrix<double, 3, 2> D = edges(x, e);
+    const Eigen::Vector3d normal = D.col(0).cross(D.col(1)).normalized();
+    const Eigen::Matrix2d G = A.transpose() * D * (rest[e].transpose() * edges(X, e)).inverse();
+    ASSERT_LE((A.transpose() * A - Eigen::Matrix2d::Identity()).cwiseAbs().maxCoeff(), 1e-14) << "triangle " << e;
+    ASSERT_LE((A.transpose() * normal).cwiseAbs().maxCoeff(), 1e-14) << "triangle " << e;
+    ASSERT_LE(std::abs(G(0, 1) - G(1, 0)), 1e-13 * G.norm()) << "triangle " << e;
+    ASSERT_GT(G.trace(), 0) << "triangle " << e;
+  }
+}
+
 // The membrane stiffness against K = h A B^T D B with the explicit CST B matrix of the
 // formulation notes, in the triangle's own 2D coordinates.
 TEST(MembraneStiffness, MatchesExplicitCstFormula) {

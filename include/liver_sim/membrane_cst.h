@@ -42,12 +42,16 @@ class MembraneCST {
   // Current frame: columns are the two in-plane axes, rotated so that rest 2D coordinates map
   // onto the current triangle (3x2).
   Eigen::Matrix<double, 3, 2> current_frame(int e, const Eigen::VectorXd& x) const;
+  // The same for triangles first .. first + 3 (first a multiple of 4) at once, vectorized across
+  // them (as the tetrahedra's kernels), into frame_.
+  void update_frames(int first, const Eigen::VectorXd& x);
   // In-plane displacement in the rotated frame of the last update (6: 2 per node).
   Eigen::Matrix<double, 6, 1> corotated_displacement(int e, const Eigen::VectorXd& x) const;
 
   Eigen::MatrixX3i F_;
   std::vector<Eigen::Matrix<double, 3, 2>> p_;     // rest 2D coordinates (rows)
   std::vector<Eigen::Matrix2d> Pm_inv_;            // inverse rest 2D edge matrix
+  std::vector<Eigen::Array4d> Pm_inv_blocks_;      // Pm_inv_ (i, j) of triangles 4 b .. 4 b + 3 at 4 b + 2 i + j
   std::vector<Eigen::Matrix<double, 3, 2>> grad_N_;
   std::vector<double> area_;
   std::vector<Eigen::Matrix<double, 6, 6>> K2_;    // in-plane stiffness, 2D local frame

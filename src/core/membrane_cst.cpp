@@ -45,6 +45,13 @@ MembraneCST::MembraneCST(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& F,
     grad_N_[e].bottomRows<2>() = Pm_inv_[e];
     grad_N_[e].row(0) = -Pm_inv_[e].colwise().sum();
   }
+  Pm_inv_blocks_.resize(n / 4 * 4);
+  for (int b = 0; b < n / 4; ++b)
+    for (int k = 0; k < 4; ++k) {
+      const int e = 4 * b;
+      const int i = k / 2, j = k % 2;
+      Pm_inv_blocks_[4 * b + k] = Eigen::Array4d(Pm_inv_[e](i, j), Pm_inv_[e + 1](i, j), Pm_inv_[e + 2](i, j), Pm_inv_[e + 3](i, j));
+    }
   set_material(material);
 }
 
@@ -83,9 +90,62 @@ Eigen::Matrix<double, 3, 2> MembraneCST::current_frame(int e, const Eigen::Vecto
   return axes * R2;
 }
 
+void MembraneCST::update_frames(int first, const Eigen::VectorXd& x) {
+  using Lanes = Eigen::Array4d;
+  Lanes e1[3], e2[3];  // the edges from node 0 to nodes 1 and 2
+  for (int l = 0; l < 4; ++l) {
+    const Eigen::Vector3d x0 = node(x, F_(first + l, 0));
+    const Eigen::Vector3d d1 = node(x, F_(first + l, 1)) - x0, d2 = node(x, F_(first + l, 2)) - x0;
+    for (int i = 0; i < 3; ++i) {
+      e1[i][l] = d1[i];
+      e2[i][l] = d2[i];
+    }
+  }
+  // plane_axes: a along the first edge, b = n x a in the plane.
+  const Lanes edge2 = e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2];
+  Lanes n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+  const Lanes normal2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+  const Lanes inv_edge = 1.0 / edge2.sqrt(), inv_normal = 1.0 / normal2.sqrt();
+  Lanes a[3], b[3];
+  for (int i = 0; i < 3; ++i) {
+    a[i] = e1[i] * inv_edge;
+    n[i] *= inv_normal;
+  }
+  b[0] = n[1] * a[2] - n[2] * a[1];
+  b[1] = n[2] * a[0] - n[0] * a[2];
+  b[2] = n[0] * a[1] - n[1] * a[0];
+  // The in-plane gradient F2 = Q Pm^-1 and its rotation, as current_frame.
+  const Lanes q00 = a[0] * e1[0] + a[1] * e1[1] + a[2] * e1[2], q01 = a[0] * e2[0] + a[1] * e2[1] + a[2] * e2[2];
+  const Lanes q10 = b[0] * e1[0] + b[1] * e1[1] + b[2] * e1[2], q11 = b[0] * e2[0] + b[1] * e2[1] + b[2] * e2[2];
+  const Lanes* P = &Pm_inv_blocks_[first];
+  const Lanes f00 = q00 * P[0] + q01 * P[2], f01 = q00 * P[1] + q01 * P[3];
+  const Lanes f10 = q10 * P[0] + q11 * P[2], f11 = q10 * P[1] + q11 * P[3];
+  const Lanes c = f00 + f11, s = f10 - f01;
+  const Lanes r = (c * c + s * s).sqrt();
+  const Lanes cr = c / r, sr = s / r;
+  for (int l = 0; l < 4; ++l) {
+    // A degenerate triangle (or a non-finite one) takes the one-triangle path and its guards.
+    if (!(edge2[l] > 0 && normal2[l] > 0 && r[l] > 0)) {
+      frame_[first + l] = current_frame(first + l, x);
+      continue;
+    }
+    for (int i = 0; i < 3; ++i) {
+      frame_[first + l](i, 0) = a[i][l] * cr[l] + b[i][l] * sr[l];
+      frame_[first + l](i, 1) = b[i][l] * cr[l] - a[i][l] * sr[l];
+    }
+  }
+}
+
 void MembraneCST::update_rotations(const Eigen::VectorXd& x) {
+  const int n = size();
 #pragma omp parallel for schedule(static)
-  for (int e = 0; e < size(); ++e) frame_[e] = current_frame(e, x);
+  for (int block = 0; block < (n + 3) / 4; ++block) {
+    if (4 * block + 4 <= n) {
+      update_frames(4 * block, x);
+    } else {
+      for (int e = 4 * block; e < n; ++e) frame_[e] = current_frame(e, x);
+    }
+  }
 }
 
 Eigen::Matrix<double, 6, 1> MembraneCST::corotated_displacement(int e, const Eigen::VectorXd& x) const {
