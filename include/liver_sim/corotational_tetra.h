@@ -8,22 +8,13 @@
 #include <array>
 #include <vector>
 
+#include "liver_sim/lanes.h"
 #include "liver_sim/options.h"
 
 namespace liver_sim {
 
 using Matrix12d = Eigen::Matrix<double, 12, 12>;
 using Vector12d = Eigen::Matrix<double, 12, 1>;
-
-// One value of each of four elements, and one 3x3 matrix of each: the element kernels run on
-// four elements at once, vectorized across them (each element's own arithmetic is a chain of
-// dependent operations that leaves the vector units idle).
-using Lanes = Eigen::Array4d;
-struct LaneMatrix {
-  Lanes m[3][3];
-  Lanes& operator()(int i, int j) { return m[i][j]; }
-  const Lanes& operator()(int i, int j) const { return m[i][j]; }
-};
 
 // The matrix of w x . (cross product with w).
 Eigen::Matrix3d cross_matrix(const Eigen::Vector3d& w);

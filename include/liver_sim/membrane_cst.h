@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 #include <vector>
 
+#include "liver_sim/lanes.h"
 #include "liver_sim/options.h"
 
 namespace liver_sim {
@@ -51,7 +52,7 @@ class MembraneCST {
   Eigen::MatrixX3i F_;
   std::vector<Eigen::Matrix<double, 3, 2>> p_;     // rest 2D coordinates (rows)
   std::vector<Eigen::Matrix2d> Pm_inv_;            // inverse rest 2D edge matrix
-  std::vector<Eigen::Array4d> Pm_inv_blocks_;      // Pm_inv_ (i, j) of triangles 4 b .. 4 b + 3 at 4 b + 2 i + j
+  std::vector<Lanes> Pm_inv_blocks_;               // Pm_inv_ (i, j) of triangles 4 b .. 4 b + 3 at 4 b + 2 i + j
   std::vector<Eigen::Matrix<double, 3, 2>> grad_N_;
   std::vector<double> area_;
   std::vector<Eigen::Matrix<double, 6, 6>> K2_;    // in-plane stiffness, 2D local frame

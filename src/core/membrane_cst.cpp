@@ -50,7 +50,7 @@ MembraneCST::MembraneCST(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& F,
     for (int k = 0; k < 4; ++k) {
       const int e = 4 * b;
       const int i = k / 2, j = k % 2;
-      Pm_inv_blocks_[4 * b + k] = Eigen::Array4d(Pm_inv_[e](i, j), Pm_inv_[e + 1](i, j), Pm_inv_[e + 2](i, j), Pm_inv_[e + 3](i, j));
+      Pm_inv_blocks_[4 * b + k] = Lanes(Pm_inv_[e](i, j), Pm_inv_[e + 1](i, j), Pm_inv_[e + 2](i, j), Pm_inv_[e + 3](i, j));
     }
   set_material(material);
 }
@@ -91,7 +91,6 @@ Eigen::Matrix<double, 3, 2> MembraneCST::current_frame(int e, const Eigen::Vecto
 }
 
 void MembraneCST::update_frames(int first, const Eigen::VectorXd& x) {
-  using Lanes = Eigen::Array4d;
   Lanes e1[3], e2[3];  // the edges from node 0 to nodes 1 and 2
   for (int l = 0; l < 4; ++l) {
     const Eigen::Vector3d x0 = node(x, F_(first + l, 0));
