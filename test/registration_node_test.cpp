@@ -17,6 +17,7 @@
 
 #include "liver_sim/SimulationStatus.h"
 #include "liver_sim/registration.h"
+#include "scenarios.h"
 #include "wait_for.h"
 
 namespace {

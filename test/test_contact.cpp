@@ -86,14 +86,14 @@ TEST(Probe, PressedIntoBlockBalancesTheSupports) {
   const int k = m.add_instrument(p);
   const StepResult res = m.step();
   ASSERT_TRUE(res.converged()) << res.message << " residual " << res.residual;
-  const LiverModel::InstrumentReaction reaction = m.instrument_reaction(k);
+  const InstrumentReaction reaction = m.instrument_reaction(k);
   EXPECT_GT(reaction.contacts, 4);
   EXPECT_GT(reaction.force.z(), 0.0) << "the tissue pushes the probe back";
   EXPECT_LE(std::hypot(reaction.force.x(), reaction.force.y()), 1e-6 * reaction.force.z());
   EXPECT_LE(reaction.torque.norm(), 1e-6 * reaction.force.z() * r);
   for (int i = 0; i < m.mesh().V.rows(); ++i)
     ASSERT_GE((node(m, i) - p.position).norm(), r - kTolerance) << "node " << i << " inside the probe";
-  const Eigen::Vector3d support = total(m.support_forces());
+  const Eigen::Vector3d support = total(m.stepper().support_forces());
   EXPECT_LE((support - reaction.force).norm(), 1e-6 * reaction.force.norm()) << support.transpose();
 
   p.position.z() -= 0.001;
@@ -134,8 +134,8 @@ TEST(Probe, DragSticksBelowCoulombAndSlidesAbove) {
 
   // Per contact node: the force on it, split along the probe's normal there.
   auto split = [&](int i) {
-    const Eigen::Vector3d f = m.contact_forces().segment<3>(3 * i);
-    const Eigen::Vector3d n = (node(m, i) - m.instrument_pose(0).translation()).normalized();
+    const Eigen::Vector3d f = m.contact().forces().segment<3>(3 * i);
+    const Eigen::Vector3d n = (node(m, i) - m.contact().pose(0).translation()).normalized();
     return std::make_pair(f.dot(n), (f - f.dot(n) * n).norm());
   };
   ASSERT_TRUE(m.step().converged());
@@ -187,7 +187,7 @@ TEST(Grasper, HoldsWhileClosedAndReleasesWhenOpened) {
   const Eigen::VectorXd grasped = m.positions();
   const StepResult lifted = m.step();
   ASSERT_TRUE(lifted.converged()) << lifted.message;
-  const LiverModel::InstrumentReaction& held = m.instrument_reaction(0);
+  const InstrumentReaction& held = m.instrument_reaction(0);
   EXPECT_GE(held.contacts, 5);  // the node under it and its four neighbours 2.5 mm away
   EXPECT_LT(held.force.z(), 0.0) << "the tissue pulls the grasper down";
   int moved = 0;
@@ -220,14 +220,14 @@ TEST(Shaft, PressesAGrooveWithoutPenetration) {
   const int k = m.add_instrument(o);
   const StepResult res = m.step();
   ASSERT_TRUE(res.converged()) << res.message;
-  const LiverModel::InstrumentReaction& reaction = m.instrument_reaction(k);
+  const InstrumentReaction& reaction = m.instrument_reaction(k);
   EXPECT_GE(reaction.contacts, 9) << "a row of nodes along the groove";
   EXPECT_GT(reaction.force.z(), 0.0);
   for (int i = 0; i < m.mesh().V.rows(); ++i) {
     const Eigen::Vector3d x = node(m, i);
     EXPECT_GE(std::hypot(x.y() - L / 2, x.z() - o.position.z()), r - kTolerance) << "node " << i;
   }
-  EXPECT_LE((total(m.support_forces()) - reaction.force).norm(), 1e-6 * reaction.force.norm());
+  EXPECT_LE((total(m.stepper().support_forces()) - reaction.force).norm(), 1e-6 * reaction.force.norm());
 }
 
 // The aspiration tube in frictional contact at its rim: the capsule reduces the lift by a
@@ -243,15 +243,15 @@ TEST(Tube, AspirationBalancesAndTheCapsuleHalvesTheLift) {
     const StepResult r = m.step();
     ASSERT_TRUE(r.converged()) << r.message;
     lift[capsule] = m.probe_displacement(0).z();
-    const LiverModel::InstrumentReaction& tube = m.instrument_reaction(0);
+    const InstrumentReaction& tube = m.instrument_reaction(0);
     EXPECT_GT(tube.contacts, 0);
     EXPECT_GT(tube.force.z(), 0.0) << "the rim holds the tissue down: the tissue pushes the tube up";
     Eigen::VectorXd suction;
-    m.external_forces(m.positions(), suction);
-    const Eigen::Vector3d sum = total(m.support_forces()) + total(m.contact_forces()) + total(suction);
+    m.mechanics().external_forces(m.positions(), suction);
+    const Eigen::Vector3d sum = total(m.stepper().support_forces()) + total(m.contact().forces()) + total(suction);
     EXPECT_LE(sum.norm(), 1e-6 * tube.force.norm()) << sum.transpose();
     for (int i = 0; i < m.mesh().V.rows(); ++i)
-      ASSERT_GE(surface_distance(m.instrument(0), m.instrument_pose(0), node(m, i)).distance, -kTolerance) << i;
+      ASSERT_GE(surface_distance(m.instrument(0), m.contact().pose(0), node(m, i)).distance, -kTolerance) << i;
   }
   EXPECT_GT(lift[1], 0.0);
   EXPECT_GE(lift[0] / lift[1], 1.5);
@@ -311,13 +311,13 @@ TEST(Contact, PathSkippedWhenNoInstrumentTouches) {
   InstrumentOptions p = probe("probe", {L / 2, L / 2, L + 0.01}, 0.003);  // 7 mm above
   const int k = m.add_instrument(p);
   for (int i = 0; i < 5; ++i) ASSERT_TRUE(m.step().converged());
-  EXPECT_EQ(m.contact_solves(), 0);
-  EXPECT_EQ(m.compliance_columns(), 0);
+  EXPECT_EQ(m.contact().solves(), 0);
+  EXPECT_EQ(m.contact().compliance_columns(), 0);
   p.position.z() = L + 0.003 - 0.002;  // 2 mm below the rest surface, ~1.3 mm below the sagged one
   m.update_instrument(k, p);
   ASSERT_TRUE(m.step().converged());
-  EXPECT_GT(m.contact_solves(), 0);
-  EXPECT_GT(m.compliance_columns(), 0);
+  EXPECT_GT(m.contact().solves(), 0);
+  EXPECT_GT(m.contact().compliance_columns(), 0);
 }
 
 // Bad input: a clear error for zero or negative sizes, NaN poses, negative friction; an

@@ -110,7 +110,7 @@ TEST(ModelLoads, SpreadForceSumsToTotalAndPressureOnClosedSurfaceSumsToZero) {
   s.loads = {f, p};
   LiverModel m(make_box_mesh({0.01, 0.01, 0.01}, {3, 3, 3}), s);
   Eigen::VectorXd fext;
-  m.external_forces(m.positions(), fext);
+  m.mechanics().external_forces(m.positions(), fext);
   Eigen::Vector3d total = Eigen::Vector3d::Zero();
   for (int i = 0; i < fext.size(); i += 3) total += fext.segment<3>(i);
   EXPECT_LE((total - f.vector).norm(), 1e-12);
@@ -149,13 +149,13 @@ TEST_F(Aspiration, CapsuleReducesDisplacementByFactorNearTwo) {
 // same answer as a model built from scratch with those values.
 TEST_F(Aspiration, RuntimeCapsuleChangeMatchesFreshModelWithoutReanalysis) {
   solve();
-  const int analyses = model_->linear_solver().analyses();
+  const int analyses = model_->stepper().linear_solver().analyses();
   CapsuleOptions c = scene_.capsule;
   c.young_modulus = 3e6;
   c.thickness = 93e-6;
   ASSERT_EQ(model_->set_capsule(c), "");
   const double changed = solve();
-  EXPECT_EQ(model_->linear_solver().analyses(), analyses);
+  EXPECT_EQ(model_->stepper().linear_solver().analyses(), analyses);
 
   Scene fresh_scene = scene_;
   fresh_scene.capsule = c;
@@ -332,17 +332,17 @@ TEST_F(Aspiration, ElasticEnergyIsRotationInvariantAndItsGradientIsTheForce) {
     for (int i = 0; i < z.size(); i += 3) z.segment<3>(i) = Q * y.segment<3>(i) + Eigen::Vector3d(0.01, 0, -0.02);
     return z;
   };
-  const double E = model_->elastic_energy(x);
+  const double E = model_->mechanics().elastic_energy(x);
   ASSERT_GT(E, 0);
-  EXPECT_NEAR(model_->elastic_energy(rotated(x)), E, 1e-9 * E);
+  EXPECT_NEAR(model_->mechanics().elastic_energy(rotated(x)), E, 1e-9 * E);
   Eigen::VectorXd X = x;
   for (int i = 0; i < X.size(); ++i) X[i] = model_->mesh().V(i / 3, i % 3);
-  EXPECT_LE(model_->elastic_energy(rotated(X)), 1e-12 * E);
+  EXPECT_LE(model_->mechanics().elastic_energy(rotated(X)), 1e-12 * E);
   Eigen::VectorXd f, v = Eigen::VectorXd::Zero(x.size());
   for (int i = 0; i < v.size(); ++i) v[i] = std::sin(0.37 * i);
-  model_->internal_forces(x, f);
+  model_->mechanics().internal_forces(x, f);
   const double h = 1e-7;
-  const double dE = (model_->elastic_energy(x + h * v) - model_->elastic_energy(x - h * v)) / (2 * h);
+  const double dE = (model_->mechanics().elastic_energy(x + h * v) - model_->mechanics().elastic_energy(x - h * v)) / (2 * h);
   EXPECT_NEAR(dE, f.dot(v), 0.02 * std::abs(f.dot(v)));
 }
 

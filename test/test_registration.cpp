@@ -8,6 +8,7 @@
 #include <random>
 
 #include "liver_sim/registration.h"
+#include "scenarios.h"
 #include "regions.h"
 
 namespace liver_sim {
@@ -96,7 +97,7 @@ TEST(SurfaceTargets, PullBalancesTheSupportsAndStopsShortOfTheTarget) {
   ASSERT_GE(b.triangle, 0);
   const Eigen::Vector3d w(0.2, 0.3, 0.5);
   const Eigen::Vector3d start = b.point(w);
-  LiverModel::SurfaceTarget t;
+  SurfaceTarget t;
   t.triangle = b.triangle;
   t.weights = w;
   t.point = start + Eigen::Vector3d(0.001, 0.0, 0.004);
@@ -106,7 +107,7 @@ TEST(SurfaceTargets, PullBalancesTheSupportsAndStopsShortOfTheTarget) {
   ASSERT_TRUE(r.converged()) << r.message;
   // The spring's force k (p - x) is what the supports hold.
   const Eigen::Vector3d pull = t.stiffness * (t.point - b.point(w));
-  const Eigen::VectorXd support = b.model->support_forces();
+  const Eigen::VectorXd support = b.model->stepper().support_forces();
   Eigen::Vector3d held = Eigen::Vector3d::Zero();
   for (int i = 0; i < support.size(); i += 3) held += support.segment<3>(i);
   EXPECT_LT((held + pull).norm(), 1e-6 * pull.norm());
@@ -119,7 +120,7 @@ TEST(SurfaceTargets, PullBalancesTheSupportsAndStopsShortOfTheTarget) {
 TEST(SurfaceTargets, PointToPlaneIgnoresSlidingAlongThePlane) {
   SpringBlock b;
   const Eigen::Vector3d w(1.0 / 3, 1.0 / 3, 1.0 / 3);
-  LiverModel::SurfaceTarget t;
+  SurfaceTarget t;
   t.triangle = b.triangle;
   t.weights = w;
   t.point = b.point(w) + Eigen::Vector3d(0.003, -0.002, 0.0);  // in the top face's plane
@@ -133,7 +134,7 @@ TEST(SurfaceTargets, PointToPlaneIgnoresSlidingAlongThePlane) {
   t.point += Eigen::Vector3d(0, 0, 0.002);
   b.model->set_surface_targets({t});
   ASSERT_TRUE(b.model->step().converged());
-  const Eigen::VectorXd support = b.model->support_forces();
+  const Eigen::VectorXd support = b.model->stepper().support_forces();
   Eigen::Vector3d held = Eigen::Vector3d::Zero();
   for (int i = 0; i < support.size(); i += 3) held += support.segment<3>(i);
   EXPECT_LT(held.head<2>().norm(), 1e-6 * std::abs(held.z()));
@@ -144,7 +145,7 @@ TEST(SurfaceTargets, DynamicStepsSettleOnTheStaticPull) {
   // The springs' work enters the energy check of dynamic steps: pulling never reads as energy
   // growth, and the motion settles where the static solve ends.
   SpringBlock still, moving(true);
-  LiverModel::SurfaceTarget t;
+  SurfaceTarget t;
   t.triangle = still.triangle;
   t.weights = Eigen::Vector3d(0.2, 0.3, 0.5);
   t.point = still.point(t.weights) + Eigen::Vector3d(0.001, 0.0, 0.004);
@@ -164,12 +165,12 @@ TEST(SurfaceTargets, DynamicStepsSettleOnTheStaticPull) {
 
 TEST(SurfaceTargets, BadTargetsAreRefusedAndChangeNothing) {
   SpringBlock b;
-  LiverModel::SurfaceTarget t;
+  SurfaceTarget t;
   t.triangle = b.triangle;
   t.weights = Eigen::Vector3d(1, 0, 0);
   t.stiffness = 1.0;
   b.model->set_surface_targets({t});
-  LiverModel::SurfaceTarget bad = t;
+  SurfaceTarget bad = t;
   bad.triangle = static_cast<int>(b.model->boundary().rows());
   EXPECT_THROW(b.model->set_surface_targets({bad}), std::invalid_argument);
   bad = t;

@@ -355,7 +355,7 @@ TEST(EmbeddedVessel, RigidRotationOfTissueAndVesselGivesZeroForce) {
   Eigen::VectorXd x = m.positions();
   for (int i = 0; i < x.size(); i += 3) x.segment<3>(i) = Q * x.segment<3>(i) + Eigen::Vector3d(0.01, 0.02, -0.03);
   Eigen::VectorXd f;
-  m.internal_forces(x, f);
+  m.mechanics().internal_forces(x, f);
   // Scale: the force that a 1% strain of the block makes, E A 0.01.
   EXPECT_LE(f.cwiseAbs().maxCoeff(), 1e-9 * 3000 * 1e-4 * 0.01);
 }
@@ -439,7 +439,7 @@ TEST(LiverPhantom, HasTheStatedSizeVesselsAndTargets) {
 TEST(LiverPhantom, FactorKeepsTheOrderingWithLessFill) {
   const Scene s = load_scene(std::string(LIVER_SIM_SOURCE_DIR) + "/config/scenes/liver_phantom.yaml");
   LiverModel m(load_scene_mesh(s), s);
-  const SparsePattern& pattern = m.pattern();
+  const SparsePattern& pattern = m.mechanics().pattern();
   cholmod_common common;
   cholmod_start(&common);
   cholmod_sparse A{};
@@ -457,7 +457,7 @@ TEST(LiverPhantom, FactorKeepsTheOrderingWithLessFill) {
   const double default_fill = common.lnz;
   cholmod_free_factor(&L, &common);
   cholmod_finish(&common);
-  EXPECT_LT(m.linear_solver().factor_nonzeros(), 0.95 * default_fill) << "default " << default_fill;
+  EXPECT_LT(m.stepper().linear_solver().factor_nonzeros(), 0.95 * default_fill) << "default " << default_fill;
 }
 
 // Real-time frames on the phantom (10 ms, one modified-Newton iteration each, breathing

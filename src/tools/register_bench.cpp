@@ -25,6 +25,7 @@
 
 #include "liver_sim/liver_model.h"
 #include "liver_sim/registration.h"
+#include "scenarios.h"
 
 namespace {
 

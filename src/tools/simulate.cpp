@@ -169,7 +169,7 @@ int run(const Options& opt) {
      << ", \"factorization\": " << sum.factorization_ms / steps_done
      << ", \"solve\": " << sum.solve_ms / steps_done << ", \"contact\": " << sum.contact_ms / steps_done << "},\n"
      << "  \"contact\": {\"max_contacts\": " << max_contacts << ", \"gauss_seidel_sweeps\": " << contact_sweeps
-     << ", \"problems_solved\": " << model.contact_solves() << ", \"compliance_columns\": " << model.compliance_columns()
+     << ", \"problems_solved\": " << model.contact().solves() << ", \"compliance_columns\": " << model.contact().compliance_columns()
      << "},\n"
      << "  \"max_displacement\": " << model.max_displacement() << ",\n"
      << "  \"probes\": {";
@@ -178,7 +178,7 @@ int run(const Options& opt) {
        << json_vec(model.probe_displacement(p)) << "}";
   js << (model.num_probes() ? "\n  " : "") << "},\n  \"instruments\": {";
   for (int i = 0; i < model.num_instruments(); ++i) {
-    const LiverModel::InstrumentReaction& r = model.instrument_reaction(i);
+    const liver_sim::InstrumentReaction& r = model.instrument_reaction(i);
     js << (i ? ", " : "") << "\n    " << json_string(model.instrument(i).name) << ": {\"force\": " << json_vec(r.force)
        << ", \"torque\": " << json_vec(r.torque) << ", \"contacts\": " << r.contacts << "}";
   }

@@ -1,0 +1,132 @@
+// The time stepper, ROS-free: static equilibrium and backward-Euler time steps by Newton's
+// method on the mechanical model (mechanical_model.h), with the update strategies (Newton-Krylov,
+// full and modified Newton, conjugate gradients), the predictors of dynamic steps, the line
+// search, the decisions to reuse or refresh the CHOLMOD factor, and the detectors that roll a
+// diverging step back. It owns the state (positions, velocities, time).
+//
+// It asks the contact (instrument_contact.h) for the contact forces, violation and constrained
+// update, and hands it its factor; it may not look inside the element sets or the contact rows.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/SparseCholesky>
+#include <limits>
+#include <string>
+
+#include "liver_sim/cholmod_solver.h"
+#include "liver_sim/conjugate_gradient.h"
+#include "liver_sim/gmres.h"
+#include "liver_sim/instrument_contact.h"
+#include "liver_sim/mechanical_model.h"
+
+namespace liver_sim {
+
+// Wall time of one step by phase (ms).
+struct StepTiming {
+  double assembly_ms = 0;       // rotation update, internal/external forces, tangent assembly
+  double factorization_ms = 0;  // CHOLMOD numeric factorisations
+  double solve_ms = 0;          // GMRES: triangular solves and Jacobian products
+  double contact_ms = 0;        // detection, compliance columns, Delassus operator, Gauss-Seidel
+  double total_ms = 0;
+};
+
+struct StepResult {
+  enum class Status {
+    Converged,     // residual below tolerance
+    NotConverged,  // iteration cap reached closer to equilibrium; the state is kept (the next step
+                   // continues from it)
+    Diverged       // rolled back: non-finite values, a tangent that is not positive definite, a
+                   // residual blow-up, a stall (the cap reached no closer to equilibrium than the
+                   // step started), or (dynamic) mechanical energy growing beyond the work done
+  };
+  Status status = Status::Converged;
+  int iterations = 0;         // Newton iterations (factorisations) in this step
+  int linear_iterations = 0;  // GMRES iterations (preconditioned solves) in this step
+  int factorizations = 0;     // numeric factorisations in this step (often 0: the factor is reused)
+  int contacts = 0;           // instrument contacts carrying force at the end of the step
+  int contact_sweeps = 0;     // Gauss-Seidel sweeps of the contact solves in this step
+  double residual = 0;      // force residual relative to the load norm, at the end
+  StepTiming timing;
+  std::string message;      // why, when not converged
+  bool converged() const { return status == Status::Converged; }
+};
+
+class NewtonStepper {
+ public:
+  // Analyses the matrix pattern (CHOLMOD). Throws std::invalid_argument for invalid options.
+  NewtonStepper(MechanicalModel& mechanics, InstrumentContact& contact, const SolverOptions& solver);
+
+  // Static mode: Newton to equilibrium under the loads times load_scale(). Dynamic mode: one
+  // backward-Euler time step of solver.dt. Both advance time() by solver.dt (in static mode a
+  // pseudo-time that drives the instruments' trajectories). A diverging step restores the
+  // state before it.
+  StepResult step();
+
+  // Static load continuation: loads are multiplied by this factor (default 1).
+  void set_load_scale(double s) { load_scale_ = s; }
+  double load_scale() const { return load_scale_; }
+
+  const SolverOptions& options() const { return solver_; }
+  // Strategy, iteration cap, tolerance, line search, dt and damping, from the next step on. The
+  // mode cannot change. Returns "" on success, else the validation message (nothing changed).
+  std::string set_options(const SolverOptions& solver);
+
+  const Eigen::VectorXd& positions() const { return x_; }  // 3 #V, node-major (m)
+  // Overwrites the current state (tests start from a given configuration).
+  void set_positions(const Eigen::VectorXd& x);
+  const Eigen::VectorXd& step_start() const { return x_start_; }  // positions the last step started from
+  double time() const { return time_; }
+
+  // The mechanical model changed other than through the state (material, capsule, springs):
+  // the energy known for the state is void and, with refactorize, the factor too.
+  void model_changed(bool refactorize);
+  // The next Newton iteration factorises the matrix afresh.
+  void refactorize() { factor_valid_ = false; }
+  // Back to the rest shape, zero velocity, time 0.
+  void reset();
+
+  // Force the supports exert on the tissue at the fixed DOFs (N; 0 elsewhere).
+  Eigen::VectorXd support_forces();
+  CholmodSolver& linear_solver() { return cholmod_; }
+
+ private:
+  // Residual r = loads - internal - inertia - damping + contact at x (dynamic terms use x_start_,
+  // v_). Returns its free-DOF norm and the reference norm it is measured against. With
+  // zero_fixed = false the entries at fixed DOFs are kept: minus the constraint forces.
+  double residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference, bool zero_fixed = true);
+  // Line-search merit: the free residual norm and the contact violation, in newtons.
+  double merit(double residual_norm, const Eigen::VectorXd& x) const;
+  // Newton iterations from the current state; adds to result (iterations, timings, status).
+  void newton(StepResult& result);
+  // Dynamic steps: the mechanical energy (kinetic + elastic) and the work of the loads and of
+  // the constraints over the step that ended at x_ (J).
+  double mechanical_energy(const Eigen::VectorXd& x, const Eigen::VectorXd& v);
+  double work_over_step();
+  // The Newton matrix into system_ with the element rotations of the last residual() call: the
+  // solver always assembles where it last evaluated.
+  void assemble_system();
+
+  MechanicalModel& mechanics_;
+  InstrumentContact& contact_;
+  SolverOptions solver_;
+  std::vector<double> system_;
+  bool factor_valid_ = false;  // the factor preconditions the current constraint set and material
+  CholmodSolver cholmod_;
+  Gmres gmres_;
+  ConjugateGradient cg_;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Upper> eigen_ldlt_;
+  bool eigen_analyzed_ = false;
+  Eigen::VectorXd jacobi_;  // inverse diagonal of system_ (CG strategy)
+
+  Eigen::VectorXd x_, v_, x_start_;
+  Eigen::VectorXd v_previous_;  // velocity of the step before the last (the predictor's acceleration)
+  bool rotations_continued_ = false;  // the last step predicted the rotations and was accepted
+  double load_scale_ = 1.0;
+  double state_energy_ = std::numeric_limits<double>::quiet_NaN();  // J, of (x_, v_) when known
+  double time_ = 0.0;
+
+  // Work vectors kept between steps (no allocation per step).
+  Eigen::VectorXd r_, r_try_, dx_, x_try_, f_tmp_, v_tmp_, f_ext_, energy_work_;
+};
+
+}  // namespace liver_sim

@@ -1,0 +1,396 @@
+#include "liver_sim/mechanical_model.h"
+
+#include <omp.h>
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace liver_sim {
+namespace {
+
+void require_valid(const std::string& message) {
+  if (!message.empty()) throw std::invalid_argument(message);
+}
+
+TetMesh validated(TetMesh mesh) {
+  validate_mesh(mesh, "mesh");
+  return mesh;
+}
+
+template <typename Options>
+const Options& validated(const Options& o) {
+  require_valid(validate(o));
+  return o;
+}
+
+Eigen::VectorXd flatten(const Eigen::MatrixX3d& V) {
+  Eigen::VectorXd x(3 * V.rows());
+  for (int i = 0; i < V.rows(); ++i) x.segment<3>(3 * i) = V.row(i).transpose();
+  return x;
+}
+
+}  // namespace
+
+MechanicalModel::MechanicalModel(TetMesh mesh, const Scene& scene)
+    : mesh_(validated(std::move(mesh))),
+      boundary_(boundary_triangles(mesh_.T)),
+      parenchyma_(validated(scene.parenchyma)),
+      capsule_(validated(scene.capsule)),
+      tetra_(mesh_.V, mesh_.T, parenchyma_),
+      membrane_(mesh_.V, boundary_, capsule_),
+      vessels_(tetra_, mesh_.V, scene.vessels, parenchyma_.rotation) {
+  const int n = static_cast<int>(mesh_.V.rows());
+  const int dofs = 3 * n;
+  pattern_ = SparsePattern(n, mesh_.T, vessels_.coupled_nodes());
+  on_boundary_.assign(n, 0);
+  for (int f = 0; f < boundary_.rows(); ++f)
+    for (int k = 0; k < 3; ++k) on_boundary_[boundary_(f, k)] = 1;
+
+  tet_map_.reserve(144 * mesh_.T.rows());
+  for (int e = 0; e < mesh_.T.rows(); ++e) {
+    const int nodes[4] = {mesh_.T(e, 0), mesh_.T(e, 1), mesh_.T(e, 2), mesh_.T(e, 3)};
+    pattern_.append_scatter_map(nodes, 4, tet_map_);
+  }
+  tri_map_.reserve(81 * boundary_.rows());
+  for (int f = 0; f < boundary_.rows(); ++f) {
+    const int nodes[3] = {boundary_(f, 0), boundary_(f, 1), boundary_(f, 2)};
+    pattern_.append_scatter_map(nodes, 3, tri_map_);
+  }
+  beam_map_.reserve(576 * vessels_.coupled_nodes().size());
+  for (const std::vector<int>& g : vessels_.coupled_nodes()) pattern_.append_scatter_map(g.data(), 8, beam_map_);
+  stiffness_.assign(pattern_.nonzeros(), 0.0);
+  threads_ = std::max(1, omp_get_max_threads());
+  thread_forces_.resize(threads_);
+  thread_energy_.assign(threads_, 0.0);
+  thread_stiffness_.assign(threads_, std::vector<double>());
+  for (int t = 1; t < threads_; ++t) {
+    thread_forces_[t].setZero(dofs);
+    thread_stiffness_[t].assign(pattern_.nonzeros(), 0.0);
+  }
+
+  X_ = flatten(mesh_.V);
+  mass_ = Eigen::VectorXd::Zero(dofs);
+  for (int e = 0; e < mesh_.T.rows(); ++e)
+    for (int k = 0; k < 4; ++k)
+      mass_.segment<3>(3 * mesh_.T(e, k)).array() += parenchyma_.density * tetra_.volume(e) / 4;
+  const Eigen::Vector3d extent = mesh_.V.colwise().maxCoeff() - mesh_.V.colwise().minCoeff();
+  length_scale_ = extent.norm();
+  force_floor_ = 1e-12 * parenchyma_.young_modulus * extent.squaredNorm();
+
+  require_valid(set_capsule(capsule_));
+
+  std::vector<int> fixed_nodes;
+  for (size_t i = 0; i < scene.fixed.size(); ++i) {
+    const std::vector<int> s = select_nodes(scene.fixed[i], "fixed." + std::to_string(i));
+    fixed_nodes.insert(fixed_nodes.end(), s.begin(), s.end());
+  }
+  if (fixed_nodes.empty() && scene.solver.mode == SolverOptions::Mode::Static)
+    throw std::invalid_argument("fixed: a static scene needs fixed nodes (the stiffness matrix is singular otherwise)");
+  fixed_by_scene_.assign(n, 0);
+  for (int i : fixed_nodes) fixed_by_scene_[i] = 1;
+  set_fixed(fixed_nodes);
+  for (int i = 0; i < n; ++i)
+    if (on_boundary_[i]) boundary_nodes_.push_back(i);
+
+  for (size_t i = 0; i < scene.loads.size(); ++i) {
+    const LoadOptions& load = scene.loads[i];
+    const std::string what = "loads." + std::to_string(i);
+    switch (load.kind) {
+      case LoadOptions::Kind::Pressure: {
+        if (!std::isfinite(load.pressure)) throw std::invalid_argument(what + ".value must be finite");
+        PressureLoad p{load.pressure, {}};
+        if (load.region) {
+          p.triangles = select_triangles(*load.region, what + ".region");
+        } else {
+          p.triangles.resize(boundary_.rows());
+          for (int f = 0; f < boundary_.rows(); ++f) p.triangles[f] = f;
+        }
+        pressures_.push_back(std::move(p));
+        break;
+      }
+      case LoadOptions::Kind::Gravity: {
+        if (!load.vector.allFinite()) throw std::invalid_argument(what + ".acceleration must be finite");
+        gravity_ += load.vector;
+        break;
+      }
+      case LoadOptions::Kind::Force: {
+        if (!load.vector.allFinite()) throw std::invalid_argument(what + ".total must be finite");
+        if (!load.region) throw std::invalid_argument(what + ".region is required for a force");
+        std::vector<int> nodes = select_nodes(*load.region, what + ".region");
+        nodal_loads_.push_back({load.vector / static_cast<double>(nodes.size()), std::move(nodes)});
+        break;
+      }
+    }
+  }
+
+  for (const ProbeOptions& p : scene.probes) {
+    if (!p.point.allFinite()) throw std::invalid_argument("probe '" + p.name + "': point must be finite");
+    const EmbeddedPoint at = locate(tetra_, mesh_.V, p.point);
+    // Points on a curved surface may sit a little outside the faceted mesh.
+    if (at.barycentric.minCoeff() < -0.05) throw std::invalid_argument("probe '" + p.name + "' lies outside the mesh");
+    probes_.push_back({p.name, at});
+  }
+  energy_work_.setZero(dofs);
+}
+
+std::vector<int> MechanicalModel::select_nodes(const Region& r, const std::string& what) const {
+  require_valid(validate(r));
+  std::vector<int> nodes;
+  for (int i = 0; i < mesh_.V.rows(); ++i)
+    if ((!r.boundary_only() || on_boundary_[i]) && r.contains(mesh_.V.row(i).transpose()))
+      nodes.push_back(i);
+  if (nodes.empty()) throw std::invalid_argument(what + ": the region selects no node");
+  return nodes;
+}
+
+std::vector<int> MechanicalModel::select_triangles(const Region& r, const std::string& what) const {
+  require_valid(validate(r));
+  std::vector<int> triangles;
+  for (int f = 0; f < boundary_.rows(); ++f) {
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 3; ++k) c += mesh_.V.row(boundary_(f, k)).transpose() / 3.0;
+    if (r.contains(c)) triangles.push_back(f);
+  }
+  if (triangles.empty()) throw std::invalid_argument(what + ": the region selects no boundary triangle");
+  return triangles;
+}
+
+void MechanicalModel::set_fixed(const std::vector<int>& nodes) {
+  fixed_dof_.assign(X_.size(), 0);
+  for (int node : nodes)
+    for (int c = 0; c < 3; ++c) fixed_dof_[3 * node + c] = 1;
+  fixed_entries_.clear();
+  const auto& start = pattern_.column_start();
+  const auto& rows = pattern_.row_index();
+  for (int col = 0; col < pattern_.rows(); ++col)
+    for (int k = start[col]; k < start[col + 1]; ++k)
+      if (rows[k] != col && (fixed_dof_[col] || fixed_dof_[rows[k]])) fixed_entries_.push_back(k);
+}
+
+std::string MechanicalModel::set_capsule(const CapsuleOptions& capsule) {
+  const std::string error = validate(capsule);
+  if (!error.empty()) return error;
+  std::vector<int> active;
+  if (capsule.region) {
+    try {
+      active = select_triangles(*capsule.region, "capsule.region");
+    } catch (const std::invalid_argument& e) {
+      return e.what();
+    }
+  } else {
+    active.resize(boundary_.rows());
+    for (int f = 0; f < boundary_.rows(); ++f) active[f] = f;
+  }
+  membrane_.set_material(capsule);
+  rotations_at_.resize(0);  // the membrane rotations may not follow the last evaluation
+  capsule_active_ = std::move(active);
+  capsule_ = capsule;
+  return "";
+}
+
+int MechanicalModel::capsule_triangles() const {
+  return capsule_.enabled ? static_cast<int>(capsule_active_.size()) : 0;
+}
+
+int MechanicalModel::add_pressure_load() {
+  pressures_.push_back({0.0, {}});
+  return static_cast<int>(pressures_.size()) - 1;
+}
+
+void MechanicalModel::reset() {
+  tetra_.reset_rotations();
+  rotations_at_.resize(0);
+  surface_targets_.clear();
+}
+
+void MechanicalModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
+  // The last evaluation is kept: a step starts where the previous one ended, and the energy
+  // check looks at the state the line search accepted.
+  if (evaluated_at(x)) {
+    f = internal_at_;
+    return;
+  }
+  f.setZero(x.size());
+  if (capsule_.enabled) membrane_.update_rotations(x);  // the tetrahedra's rotations come with their forces
+  // Elements split over the cores, each thread adding into its own force vector (thread 0
+  // into f); the vectors are summed in a fixed order, so a result depends only on the thread count.
+  const int active = static_cast<int>(capsule_active_.size());
+#pragma omp parallel num_threads(threads_)
+  {
+    const int thread = omp_get_thread_num();
+    Eigen::VectorXd& ft = thread == 0 ? f : thread_forces_[thread];
+    if (thread > 0) ft.setZero(x.size());
+    double energy = 0;  // the strain energy comes with the forces, at little extra cost
+    Vector12d fe[4];
+    const int tetrahedra = tetra_.size();
+#pragma omp for schedule(static) nowait
+    for (int block = 0; block < (tetrahedra + 3) / 4; ++block) {  // four at a time: see polar_rotations
+      const int first = 4 * block, count = std::min(4, tetrahedra - first);
+      energy += tetra_.element_forces(first, count, x, fe);
+      for (int i = 0; i < count; ++i)
+        for (int k = 0; k < 4; ++k) ft.segment<3>(3 * mesh_.T(first + i, k)) += fe[i].segment<3>(3 * k);
+    }
+    if (capsule_.enabled) {
+      Vector9d fm;
+#pragma omp for schedule(static) nowait
+      for (int i = 0; i < active; ++i) {
+        const int t = capsule_active_[i];
+        energy += membrane_.element_force(t, x, fm);
+        for (int k = 0; k < 3; ++k) ft.segment<3>(3 * boundary_(t, k)) += fm.segment<3>(3 * k);
+      }
+    }
+    thread_energy_[thread] = energy;
+  }
+  tissue_energy_at_ = thread_energy_[0];
+  for (int thread = 1; thread < threads_; ++thread) {
+    f += thread_forces_[thread];
+    tissue_energy_at_ += thread_energy_[thread];
+  }
+  if (!vessels_.empty()) vessels_.add_forces(x, f);
+  rotations_at_ = x;
+  internal_at_ = f;
+}
+
+double MechanicalModel::elastic_energy(const Eigen::VectorXd& x) {
+  internal_forces(x, energy_work_);  // brings every rotation and beam frame to x (often already there)
+  double energy = tissue_energy_at_;
+  for (int e = 0; e < vessels_.num_beams(); ++e) energy += vessels_.beam_energy(e);
+  return energy;
+}
+
+void MechanicalModel::external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
+  f.setZero(x.size());
+  for (const PressureLoad& p : pressures_) {
+    for (int t : p.triangles) {
+      const int a = boundary_(t, 0), b = boundary_(t, 1), c = boundary_(t, 2);
+      // Follower load: -p times the current outward area vector, a third to each node.
+      const Eigen::Vector3d area = 0.5 * (x.segment<3>(3 * b) - x.segment<3>(3 * a))
+                                             .cross(x.segment<3>(3 * c) - x.segment<3>(3 * a));
+      const Eigen::Vector3d fn = -p.pressure * area / 3.0;
+      f.segment<3>(3 * a) += fn;
+      f.segment<3>(3 * b) += fn;
+      f.segment<3>(3 * c) += fn;
+    }
+  }
+  for (const NodalLoad& l : nodal_loads_)
+    for (int node : l.nodes) f.segment<3>(3 * node) += l.force;
+  if (!gravity_.isZero())
+    for (int i = 0; i < f.size(); i += 3) f.segment<3>(i) += mass_[i] * gravity_;
+}
+
+void MechanicalModel::set_surface_targets(std::vector<SurfaceTarget> targets) {
+  for (size_t i = 0; i < targets.size(); ++i) {
+    const SurfaceTarget& t = targets[i];
+    const std::string which = "surface target " + std::to_string(i);
+    if (t.triangle < 0 || t.triangle >= boundary_.rows())
+      throw std::invalid_argument(which + ": triangle " + std::to_string(t.triangle) + " is not a boundary triangle");
+    if (!t.weights.allFinite() || !t.point.allFinite() || !t.normal.allFinite() || !std::isfinite(t.stiffness) ||
+        t.stiffness < 0)
+      throw std::invalid_argument(which + ": weights, point, normal and stiffness must be finite, stiffness >= 0");
+    if (!t.normal.isZero(0.0) && std::abs(t.normal.norm() - 1) > 1e-9)
+      throw std::invalid_argument(which + ": the normal must be a unit vector or zero");
+  }
+  surface_targets_ = std::move(targets);
+}
+
+double MechanicalModel::spring_stiffness() const {
+  double total = 0;
+  for (const SurfaceTarget& t : surface_targets_) total += t.stiffness;
+  return total;
+}
+
+void MechanicalModel::add_target_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
+  for (const SurfaceTarget& t : surface_targets_) {
+    Eigen::Vector3d on_surface = -t.point;
+    for (int j = 0; j < 3; ++j) on_surface += t.weights[j] * x.segment<3>(3 * boundary_(t.triangle, j));
+    const Eigen::Vector3d pull =
+        -t.stiffness * (t.normal.isZero(0.0) ? on_surface : Eigen::Vector3d(t.normal * t.normal.dot(on_surface)));
+    for (int j = 0; j < 3; ++j) f.segment<3>(3 * boundary_(t.triangle, j)) += t.weights[j] * pull;
+  }
+}
+
+void MechanicalModel::snapshot_damping(const Eigen::VectorXd& x) {
+  internal_forces(x, energy_work_);  // brings rotations, frames and hosts to x (usually already there)
+  damping_.tet_rotation = tetra_.rotations();
+  if (capsule_.enabled) damping_.membrane_frame = membrane_.frames();
+  vessels_.snapshot_damping();
+}
+
+void MechanicalModel::damping_forces(const Eigen::VectorXd& v, Eigen::VectorXd& f) {
+  f.setZero(v.size());
+  const int active = static_cast<int>(capsule_active_.size());
+#pragma omp parallel num_threads(threads_)
+  {  // as internal_forces: per-thread vectors summed in a fixed order
+    const int thread = omp_get_thread_num();
+    Eigen::VectorXd& ft = thread == 0 ? f : thread_forces_[thread];
+    if (thread > 0) ft.setZero(v.size());
+    Vector12d fe[4];
+    const int tetrahedra = tetra_.size();
+#pragma omp for schedule(static) nowait
+    for (int block = 0; block < (tetrahedra + 3) / 4; ++block) {
+      const int first = 4 * block, count = std::min(4, tetrahedra - first);
+      tetra_.tangent_products(first, count, damping_.tet_rotation, v, fe);
+      for (int i = 0; i < count; ++i)
+        for (int k = 0; k < 4; ++k) ft.segment<3>(3 * mesh_.T(first + i, k)) += fe[i].segment<3>(3 * k);
+    }
+    if (capsule_.enabled) {
+      Vector9d fm;
+#pragma omp for schedule(static) nowait
+      for (int i = 0; i < active; ++i) {
+        const int t = capsule_active_[i];
+        membrane_.tangent_product(t, damping_.membrane_frame[t], v, fm);
+        for (int k = 0; k < 3; ++k) ft.segment<3>(3 * boundary_(t, k)) += fm.segment<3>(3 * k);
+      }
+    }
+  }
+  for (int thread = 1; thread < threads_; ++thread) f += thread_forces_[thread];
+  vessels_.add_damping_forces(v, f);
+}
+
+void MechanicalModel::assemble(double k, double m, std::vector<double>& values) {
+  const int active = static_cast<int>(capsule_active_.size());
+#pragma omp parallel num_threads(threads_)
+  {  // as internal_forces: one matrix value array per thread, summed in order
+    const int thread = omp_get_thread_num();
+    std::vector<double>& kt = thread == 0 ? stiffness_ : thread_stiffness_[thread];
+    std::fill(kt.begin(), kt.end(), 0.0);
+    Matrix12d Ke;
+#pragma omp for schedule(static) nowait
+    for (int e = 0; e < tetra_.size(); ++e) {
+      tetra_.element_tangent(e, Ke);
+      scatter_add(Ke, &tet_map_[144 * e], kt);
+    }
+    if (capsule_.enabled) {
+      Matrix9d Km;
+#pragma omp for schedule(static) nowait
+      for (int i = 0; i < active; ++i) {
+        const int t = capsule_active_[i];
+        membrane_.element_tangent(t, Km);
+        scatter_add(Km, &tri_map_[81 * t], kt);
+      }
+    }
+  }
+  for (int thread = 1; thread < threads_; ++thread)
+    for (size_t i = 0; i < stiffness_.size(); ++i) stiffness_[i] += thread_stiffness_[thread][i];
+  vessels_.add_tangent(beam_map_, stiffness_);
+  values.resize(stiffness_.size());
+  for (size_t i = 0; i < stiffness_.size(); ++i) values[i] = k * stiffness_[i];
+  // The targets' springs: external, so undamped; k w w^T (x) P per triangle, P = n n^T
+  // (point-to-plane) or I.
+  Matrix9d Kt;
+  for (const SurfaceTarget& t : surface_targets_) {
+    const Eigen::Matrix3d ww = t.stiffness * t.weights * t.weights.transpose();
+    const Eigen::Matrix3d P =
+        t.normal.isZero(0.0) ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(t.normal * t.normal.transpose());
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) Kt.block<3, 3>(3 * a, 3 * b) = ww(a, b) * P;
+    scatter_add(Kt, &tri_map_[81 * t.triangle], values);
+  }
+  for (int i = 0; i < pattern_.rows(); ++i) {
+    values[pattern_.diagonal(i)] += m * mass_[i];
+    if (fixed_dof_[i]) values[pattern_.diagonal(i)] = 1.0;
+  }
+  for (int i : fixed_entries_) values[i] = 0.0;
+}
+
+}  // namespace liver_sim

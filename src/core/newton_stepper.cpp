@@ -1,0 +1,445 @@
+#include "liver_sim/newton_stepper.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace liver_sim {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr int kMaxKrylov = 30;      // GMRES iterations per Newton step
+constexpr int kRefactorAfter = 10;  // GMRES iterations beyond which the factor is refreshed
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+const SolverOptions& validated(const SolverOptions& o) {
+  const std::string error = validate(o);
+  if (!error.empty()) throw std::invalid_argument(error);
+  return o;
+}
+
+double free_norm(const Eigen::VectorXd& r, const std::vector<char>& fixed) {
+  double s = 0;
+  for (int i = 0; i < r.size(); ++i)
+    if (!fixed[i]) s += r[i] * r[i];
+  return std::sqrt(s);
+}
+
+}  // namespace
+
+NewtonStepper::NewtonStepper(MechanicalModel& mechanics, InstrumentContact& contact, const SolverOptions& solver)
+    : mechanics_(mechanics), contact_(contact), solver_(validated(solver)) {
+  const SparsePattern& pattern = mechanics_.pattern();
+  system_.assign(pattern.nonzeros(), 0.0);
+  cholmod_.analyze(pattern.rows(), pattern.column_start(), pattern.row_index());
+  x_ = x_start_ = mechanics_.rest_positions();
+  v_ = Eigen::VectorXd::Zero(x_.size());
+  v_previous_ = v_;
+  for (Eigen::VectorXd* v : {&r_, &r_try_, &dx_, &x_try_, &f_tmp_, &v_tmp_, &f_ext_, &energy_work_}) v->setZero(x_.size());
+}
+
+std::string NewtonStepper::set_options(const SolverOptions& solver) {
+  const std::string error = validate(solver);
+  if (!error.empty()) return error;
+  if (solver.mode != solver_.mode) return "solver.mode cannot change on a running model";
+  // The factored matrix depends on dt and the damping (dynamic mode); the strategy and the
+  // iteration controls leave it valid.
+  if (solver.dt != solver_.dt || solver.rayleigh_mass != solver_.rayleigh_mass ||
+      solver.rayleigh_stiffness != solver_.rayleigh_stiffness)
+    factor_valid_ = false;
+  // The predictor's acceleration and the rotations' angular velocity are differences over one
+  // step: a new dt starts them afresh.
+  if (solver.dt != solver_.dt) {
+    v_previous_ = v_;
+    rotations_continued_ = false;
+  }
+  solver_ = solver;
+  return "";
+}
+
+void NewtonStepper::set_positions(const Eigen::VectorXd& x) {
+  x_ = x;
+  state_energy_ = std::numeric_limits<double>::quiet_NaN();
+}
+
+void NewtonStepper::model_changed(bool refactorize) {
+  state_energy_ = std::numeric_limits<double>::quiet_NaN();
+  if (refactorize) factor_valid_ = false;
+}
+
+void NewtonStepper::reset() {
+  factor_valid_ = false;
+  state_energy_ = std::numeric_limits<double>::quiet_NaN();
+  x_ = mechanics_.rest_positions();
+  v_.setZero();
+  v_previous_.setZero();
+  rotations_continued_ = false;
+  x_start_ = x_;
+  time_ = 0;
+}
+
+double NewtonStepper::mechanical_energy(const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
+  return 0.5 * v.dot(mechanics_.mass().cwiseProduct(v)) + mechanics_.elastic_energy(x);
+}
+
+double NewtonStepper::work_over_step() {
+  // Loads: trapezoid rule between the start and the end of the step. Instruments: their force
+  // at the end of the step times the displacement (they move only the nodes they touch).
+  mechanics_.external_forces(x_start_, f_ext_);
+  mechanics_.external_forces(x_, energy_work_);
+  f_ext_ = 0.5 * load_scale_ * (f_ext_ + energy_work_) + contact_.forces();
+  if (!mechanics_.surface_targets().empty()) {
+    energy_work_.setZero();
+    mechanics_.add_target_forces(x_start_, energy_work_);
+    mechanics_.add_target_forces(x_, energy_work_);
+    f_ext_ += 0.5 * energy_work_;
+  }
+  const std::vector<char>& fixed = mechanics_.fixed_dofs();
+  double work = 0;
+  for (int i = 0; i < x_.size(); ++i)
+    if (!fixed[i]) work += (x_[i] - x_start_[i]) * f_ext_[i];
+  return work;
+}
+
+double NewtonStepper::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference, bool zero_fixed) {
+  const std::vector<char>& fixed = mechanics_.fixed_dofs();
+  mechanics_.internal_forces(x, f_tmp_);
+  mechanics_.external_forces(x, r);
+  r *= load_scale_;
+  mechanics_.add_target_forces(x, r);
+  const double load_norm = free_norm(r, fixed);
+  // All DOFs: under prescribed displacements alone the reactions are the force scale.
+  const double internal_norm = f_tmp_.norm();
+  r -= f_tmp_;
+  if (contact_.active()) r += contact_.forces();
+  if (solver_.mode == SolverOptions::Mode::Dynamic) {
+    const double dt = solver_.dt;
+    // Backward Euler: M (v - v_n)/dt + D v = f_ext - f_int, v = (x - x_n)/dt, D = a M + b K.
+    v_tmp_ = (x - x_start_) / dt;
+    r -= mechanics_.mass().cwiseProduct((v_tmp_ - v_) / dt + solver_.rayleigh_mass * v_tmp_);
+    if (solver_.rayleigh_stiffness > 0 && !v_tmp_.isZero(0.0)) {  // v = 0: at rest, or before any step
+      mechanics_.damping_forces(v_tmp_, f_tmp_);
+      r -= solver_.rayleigh_stiffness * f_tmp_;
+    }
+  }
+  for (int i = 0; zero_fixed && i < r.size(); ++i)
+    if (fixed[i]) r[i] = 0;
+  *reference = std::max({load_norm, internal_norm, mechanics_.force_floor()});
+  return r.norm();
+}
+
+void NewtonStepper::assemble_system() {
+  // Static: A = K. Dynamic: A = (1 + b/dt) K + (1/dt^2 + a/dt) M.
+  double k_scale = 1.0, m_scale = 0.0;
+  if (solver_.mode == SolverOptions::Mode::Dynamic) {
+    const double dt = solver_.dt;
+    k_scale = 1.0 + solver_.rayleigh_stiffness / dt;
+    m_scale = 1.0 / (dt * dt) + solver_.rayleigh_mass / dt;
+  }
+  mechanics_.assemble(k_scale, m_scale, system_);
+}
+
+StepResult NewtonStepper::step() {
+  const auto t_step = Clock::now();
+  StepResult result;
+  x_start_ = x_;  // the last good state, restored if the step diverges
+  const bool dynamic = solver_.mode == SolverOptions::Mode::Dynamic;
+  if (dynamic && solver_.rayleigh_stiffness > 0) {
+    // Rayleigh damping b K v with the stiffness of the state the step starts from, fixed within
+    // the step so that the residual stays one function of x while Newton iterates; applied
+    // element by element, not assembled (an assembly per step cost a third of a haptic frame).
+    const auto t0 = Clock::now();
+    mechanics_.snapshot_damping(x_start_);
+    result.timing.assembly_ms += ms_since(t0);
+  }
+  const int stages = contact_.begin_step(time_ + solver_.dt, x_);
+  bool rotations_predicted = false;
+  for (int k = 1; k <= stages && result.status != StepResult::Status::Diverged; ++k) {
+    contact_.begin_stage(k, stages, x_);
+    // Dynamic: Newton starts from the predicted state (solver.predictor), whose error is
+    // O(dt^2) or O(dt^3), not O(dt): one iteration of modified Newton then lands 100x closer to
+    // the converged step (doc/performance.md). Not with contacts: a predicted node could start
+    // inside an instrument.
+    if (dynamic && k == 1 && !contact_.active() && solver_.predictor != SolverOptions::Predictor::None) {
+      x_ += solver_.dt * v_;
+      if (solver_.predictor == SolverOptions::Predictor::ConstantAcceleration) x_ += solver_.dt * (v_ - v_previous_);
+      // An instrument that moved in this step may touch the prediction: start at x_n then.
+      if (contact_.num_instruments() > 0) {
+        contact_.detect(x_);
+        if (contact_.active()) {
+          x_ = x_start_;
+          contact_.detect(x_);
+        }
+      }
+      // The rotations follow the prediction as a guess (warm polar iterations), when they are
+      // those of x_n.
+      if (!contact_.active() && mechanics_.evaluated_at(x_start_)) {
+        mechanics_.predict_rotations(rotations_continued_);
+        rotations_predicted = true;
+      }
+    }
+    newton(result);
+  }
+  if (dynamic && result.status != StepResult::Status::Diverged && result.iterations > 0) {
+    // Backward Euler dissipates: the energy cannot exceed what it had plus the work done on it.
+    // A margin of 2 leaves room for the follower loads and the corotational approximation;
+    // what it catches is a runaway. The energy at the start is the last step's end when known.
+    const double energy_before = std::isnan(state_energy_) ? mechanical_energy(x_start_, v_) : state_energy_;
+    v_tmp_ = (x_ - x_start_) / solver_.dt;
+    const double energy_after = mechanical_energy(x_, v_tmp_);
+    const double work = work_over_step();
+    state_energy_ = energy_after;
+    if (!std::isfinite(energy_after) ||
+        energy_after > 2 * (energy_before + std::abs(work)) + mechanics_.force_floor() * mechanics_.length_scale()) {
+      std::ostringstream m;
+      m << "energy growth: " << energy_after << " J after the step, " << energy_before << " J before, work "
+        << work << " J";
+      result.status = StepResult::Status::Diverged;
+      result.message = m.str();
+      state_energy_ = energy_before;
+    }
+  } else {
+    state_energy_ = std::numeric_limits<double>::quiet_NaN();
+  }
+  const bool rolled_back = result.status == StepResult::Status::Diverged;
+  rotations_continued_ = rotations_predicted && !rolled_back;
+  if (rolled_back) {
+    x_ = x_start_;
+  } else {
+    if (dynamic) {
+      v_previous_.swap(v_);
+      v_ = (x_ - x_start_) / solver_.dt;
+    }
+    time_ += solver_.dt;
+  }
+  contact_.end_step(rolled_back, x_);
+  result.contacts = contact_.loaded_contacts();
+  result.timing.total_ms = ms_since(t_step);
+  return result;
+}
+
+double NewtonStepper::merit(double residual_norm, const Eigen::VectorXd& x) const {
+  // A contact violation counts as the force that a stiffness E L would need to close it.
+  const double k = mechanics_.parenchyma().young_modulus * mechanics_.length_scale() * contact_.violation(x);
+  return std::sqrt(residual_norm * residual_norm + k * k);
+}
+
+void NewtonStepper::newton(StepResult& result) {
+  auto fail = [&](const std::string& why) {
+    result.status = StepResult::Status::Diverged;
+    result.message = why;
+  };
+  const std::vector<char>& fixed = mechanics_.fixed_dofs();
+  const SparsePattern& pattern = mechanics_.pattern();
+  const double force_floor = mechanics_.force_floor();
+  const int iterations_before = result.iterations;
+  bool refreshed = false;  // a modified-Newton iteration on an old factor was redone on a new one
+  auto t0 = Clock::now();
+  double reference = 0;
+  contact_.detect(x_);
+  double norm = residual(x_, r_, &reference);
+  const double start_merit = merit(norm, x_);
+  result.timing.assembly_ms += ms_since(t0);
+  result.status = StepResult::Status::NotConverged;
+  while (true) {
+    if (!std::isfinite(norm)) {
+      fail("non-finite residual");
+      break;
+    }
+    const double current_merit = merit(norm, x_);
+    // The line search keeps the merit near its start; a millionfold growth means the iteration
+    // has left the basin (possible without line search).
+    if (current_merit > 1e6 * std::max(start_merit, force_floor)) {
+      std::ostringstream m;
+      m << "residual blow-up: " << current_merit << " N against " << start_merit << " N at the start of the step";
+      fail(m.str());
+      break;
+    }
+    result.residual = norm / reference;
+    // Relative to the forces at play; the absolute floor is round-off, for states near rest.
+    // With instruments, the contact conditions must hold too.
+    if (norm <= std::max(solver_.tolerance * reference, force_floor) &&
+        (!contact_.active() || contact_.violation(x_) <= contact_.options().tolerance)) {
+      result.status = StepResult::Status::Converged;
+      break;
+    }
+    if (result.iterations - iterations_before == solver_.max_iterations) {
+      // Capped but closer to equilibrium: kept, the next step continues (real-time frames).
+      // No closer after all the iterations: stalled, rolled back like a divergence.
+      if (current_merit >= start_merit) {
+        std::ostringstream m;
+        m << "stalled: residual " << current_merit << " N after " << solver_.max_iterations
+          << " iterations, no lower than the " << start_merit << " N it started from";
+        fail(m.str());
+      } else {
+        result.message = "iteration cap";  // within the string's inline buffer: no allocation per frame
+      }
+      break;
+    }
+    ++result.iterations;
+    using Strategy = SolverOptions::Strategy;
+    const Strategy strategy = contact_.active() ? Strategy::NewtonKrylov : solver_.strategy;
+    const bool current_tangent = strategy == Strategy::FullNewton || strategy == Strategy::FullNewtonEigen ||
+                                 strategy == Strategy::ReusedFactorCG || strategy == Strategy::CG;
+    if (strategy == Strategy::FullNewton) factor_valid_ = false;
+    const bool uses_factor = strategy != Strategy::FullNewtonEigen && strategy != Strategy::CG;
+    if (!factor_valid_ || current_tangent) {
+      t0 = Clock::now();
+      assemble_system();
+      result.timing.assembly_ms += ms_since(t0);
+    }
+    if (strategy == Strategy::FullNewtonEigen) {
+      t0 = Clock::now();
+      const Eigen::Map<const Eigen::SparseMatrix<double>> A(pattern.rows(), pattern.rows(), pattern.nonzeros(),
+                                                            pattern.column_start().data(), pattern.row_index().data(),
+                                                            system_.data());
+      if (!eigen_analyzed_) eigen_ldlt_.analyzePattern(A);
+      eigen_analyzed_ = true;
+      eigen_ldlt_.factorize(A);
+      result.timing.factorization_ms += ms_since(t0);
+      ++result.factorizations;
+      if (eigen_ldlt_.info() != Eigen::Success || (eigen_ldlt_.vectorD().array() <= 0).any()) {
+        fail("tangent matrix is not positive definite");
+        break;
+      }
+    }
+    // The factor of an earlier tangent keeps serving as the preconditioner (GMRES works on the
+    // true Jacobian) until it no longer preconditions well or the constraints changed.
+    const bool fresh_factor = uses_factor && !factor_valid_;
+    if (fresh_factor) {
+      t0 = Clock::now();
+      const bool factored = cholmod_.factorize(system_);
+      result.timing.factorization_ms += ms_since(t0);
+      ++result.factorizations;
+      if (!factored) {
+        fail("tangent matrix is not positive definite");
+        break;
+      }
+      factor_valid_ = true;
+    }
+    // Newton-Krylov: GMRES on the true Jacobian (directional differences of the residual),
+    // preconditioned by the factorised corotational tangent. The tangent alone misses the
+    // rotation derivative and the follower-load stiffness, which under suction on soft tissue
+    // are as large as the material stiffness and make a plain modified Newton crawl.
+    t0 = Clock::now();
+    // A factorisation costs far more than a GMRES iteration: solve each linearisation well.
+    const double forcing = std::clamp(0.1 * solver_.tolerance * reference / current_merit, 1e-6, 0.1);
+    // The operators capture `this` only: a std::function keeps that without an allocation.
+    const Gmres::Operator jacobian = [this](const Eigen::VectorXd& v, Eigen::VectorXd& out) {
+      const double h = 1e-8 * mechanics_.length_scale() / std::max(v.cwiseAbs().maxCoeff(), 1e-300);
+      x_try_ = x_ + h * v;
+      double unused;
+      residual(x_try_, out, &unused);
+      const std::vector<char>& fixed = mechanics_.fixed_dofs();
+      for (int i = 0; i < out.size(); ++i) out[i] = fixed[i] ? v[i] : (r_[i] - out[i]) / h;
+    };
+    const Gmres::Operator preconditioner = [this](const Eigen::VectorXd& in, Eigen::VectorXd& out) {
+      cholmod_.solve(in, out);
+    };
+    const Gmres::Operator tangent = [this](const Eigen::VectorXd& v, Eigen::VectorXd& out) {
+      mechanics_.pattern().multiply(system_, v, out);
+    };
+    int krylov = 0;
+    if (strategy == Strategy::FullNewton || strategy == Strategy::ModifiedNewton) {
+      cholmod_.solve(r_, dx_);
+    } else if (strategy == Strategy::FullNewtonEigen) {
+      dx_ = eigen_ldlt_.solve(r_);
+    } else if (strategy == Strategy::ReusedFactorCG) {
+      krylov = cg_.solve(tangent, preconditioner, r_, dx_, forcing, kMaxKrylov);
+      if (krylov > kRefactorAfter || cg_.relative_residual() > forcing) factor_valid_ = false;
+    } else if (strategy == Strategy::CG) {
+      jacobi_.resize(pattern.rows());
+      for (int i = 0; i < pattern.rows(); ++i) jacobi_[i] = 1.0 / system_[pattern.diagonal(i)];
+      const Gmres::Operator jacobi = [this](const Eigen::VectorXd& in, Eigen::VectorXd& out) { out = jacobi_.cwiseProduct(in); };
+      krylov = cg_.solve(tangent, jacobi, r_, dx_, forcing, 20 * kMaxKrylov * kMaxKrylov);
+    } else if (!contact_.active()) {
+      krylov = gmres_.solve(jacobian, preconditioner, r_, dx_, forcing, kMaxKrylov);
+      if (krylov > kRefactorAfter || gmres_.relative_residual() > forcing) factor_valid_ = false;
+    } else {
+      const auto t_contact = Clock::now();
+      const InstrumentContact::Update update = contact_.newton_update(cholmod_, jacobian, r_, forcing, dx_);
+      result.contact_sweeps += update.sweeps;
+      krylov = update.krylov;
+      result.timing.contact_ms += ms_since(t_contact);
+      if (krylov > kRefactorAfter || update.relative_residual > forcing) factor_valid_ = false;
+    }
+    result.linear_iterations += krylov;
+    result.timing.solve_ms += ms_since(t0);
+    if (!dx_.allFinite()) {
+      fail("non-finite Newton update");
+      break;
+    }
+
+    // Backtracking guards far from the solution. A step is accepted when the merit (free
+    // residual and constraint gap) falls enough, or when the potential falls along it: the slope
+    // r . dx at the trial point, against the slope at the start, says so (trapezoid rule). The
+    // second test keeps full steps that raise the residual only because the linear step
+    // over-stretches rotating elements, as in the first step of a bending problem.
+    t0 = Clock::now();
+    double slope0 = 0;
+    for (int i = 0; i < r_.size(); ++i)
+      if (!fixed[i]) slope0 += r_[i] * dx_[i];
+    double alpha = 1.0, best_alpha = 1.0, best_norm = 0, best_merit = std::numeric_limits<double>::infinity();
+    double ref_try = reference;
+    const int max_halvings = solver_.line_search ? 6 : 0;
+    bool accepted = false;  // a trial passed the merit or the potential test
+    for (int h = 0;; ++h) {
+      x_try_ = x_ + alpha * dx_;
+      const double n_try = residual(x_try_, r_try_, &ref_try);
+      const double m_try = merit(n_try, x_try_);
+      const bool merit_falls = m_try <= (1.0 - 1e-4 * alpha) * current_merit;
+      const bool potential_falls = std::isfinite(m_try) && slope0 > 0 && r_try_.dot(dx_) >= -0.5 * slope0;
+      if (merit_falls || potential_falls || m_try < best_merit) {
+        best_merit = m_try;
+        best_norm = n_try;
+        best_alpha = alpha;
+      }
+      accepted = merit_falls || potential_falls;
+      if (accepted || h == max_halvings) break;
+      alpha *= 0.5;
+    }
+    // None was good enough: take the best one tried.
+    if (best_alpha != alpha) {
+      x_try_ = x_ + best_alpha * dx_;
+      best_norm = residual(x_try_, r_try_, &ref_try);
+    }
+    result.timing.assembly_ms += ms_since(t0);
+    // Modified Newton on an old factor that finds no descent (no trial accepted, or only by the
+    // potential test in the last iteration allowed, which would end the step above where it
+    // started and roll it back as stalled): the factor no longer fits the state. Refactorise
+    // at x (evaluated again: the tangent is assembled where the last evaluation was) and redo
+    // the iteration, once per Newton solve (per instrument stage), instead of spending it.
+    const bool last_iteration = result.iterations - iterations_before == solver_.max_iterations;
+    if (strategy == Strategy::ModifiedNewton && !fresh_factor && !refreshed && best_merit >= current_merit &&
+        (!accepted || last_iteration)) {
+      refreshed = true;
+      factor_valid_ = false;
+      --result.iterations;
+      norm = residual(x_, r_, &reference);
+      continue;
+    }
+    x_.swap(x_try_);
+    r_.swap(r_try_);
+    // Modified Newton keeps its factor while it contracts the residual well.
+    if (strategy == Strategy::ModifiedNewton && best_norm > 0.9 * norm) factor_valid_ = false;
+    norm = best_norm;
+    reference = ref_try;
+    if (contact_.detect(x_)) norm = residual(x_, r_, &reference);
+  }
+}
+
+Eigen::VectorXd NewtonStepper::support_forces() {
+  double unused;
+  residual(x_, r_try_, &unused, /*zero_fixed=*/false);
+  const std::vector<char>& fixed = mechanics_.fixed_dofs();
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(x_.size());
+  for (int i = 0; i < f.size(); ++i)
+    if (fixed[i]) f[i] = -r_try_[i];  // the support balances the residual
+  return f;
+}
+
+}  // namespace liver_sim
