@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Run time against error for every solver strategy (README, "Fast and accurate").
+"""Run time against error for every solver strategy (doc/performance.md).
 
 Runs the `bench` tool (the scene's equilibrium, then breathing loads 1 + 0.5 sin(2 pi t)) on the
 aspiration cube at about 2k, 10k and 50k tetrahedra (frames of 1 ms) and on the liver phantom
@@ -61,6 +61,7 @@ def main():
         out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
         for row in csv.DictReader(io.StringIO(out)):
             row["case"] = label
+            row["scene"] = os.path.relpath(row["scene"], REPO)  # the CSV is committed: no machine path
             rows.append(row)
             print(f"  {row['strategy']}:{row['iterations']}  mean {float(row['mean_ms']):.2f} ms  "
                   f"error {float(row['max_error']):.2e}", file=sys.stderr, flush=True)

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Per-step time against the number of active instrument contacts (README, "Contact").
+"""Per-step time against the number of active instrument contacts (doc/contact.md).
 
 Dynamic steps (dt 10 ms) on the aspiration cube (capsule on, no suction) and on the liver phantom
 (capsule and vessels, no gravity), with a sphere probe held against the top surface at sizes chosen to

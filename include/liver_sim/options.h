@@ -57,7 +57,7 @@ struct LoadOptions {
 
 struct SolverOptions {
   enum class Mode { Static, Dynamic };
-  // How each Newton iteration solves for its update (README, "Fast and accurate"). With
+  // How each Newton iteration solves for its update (doc/performance.md). With
   // instrument contacts the step uses NewtonKrylov, whose factor the contact solver needs.
   enum class Strategy {
     NewtonKrylov,     // GMRES on the true Jacobian, an earlier CHOLMOD factor as preconditioner
@@ -67,7 +67,7 @@ struct SolverOptions {
     CG,               // conjugate gradients on the current tangent, Jacobi preconditioner
     ModifiedNewton    // an earlier factor solved directly; refreshed when the residual falls slowly
   };
-  // Where a dynamic step's Newton iteration starts (README, "Fast and accurate"); the converged
+  // Where a dynamic step's Newton iteration starts (doc/performance.md); the converged
   // step does not depend on it, a capped real-time frame does.
   enum class Predictor {
     None,                 // x_n: Newton starts at the last state

@@ -1,4 +1,4 @@
-// Run time against error (README, "Fast and accurate"). The scenario: the scene's static
+// Run time against error (doc/performance.md). The scenario: the scene's static
 // equilibrium (solved once, tightly), then dynamic frames of solver.dt in which the scene's loads
 // breathe, scaled by 1 + A sin(2 pi f t) (suction on the cube, gravity on the liver: the smooth
 // inputs of an OR session). Each solver strategy runs it, every frame timed, and its displacement

@@ -1,4 +1,4 @@
-// Registration benchmark without hardware (README, "Registration"). Ground truth: the scene's
+// Registration benchmark without hardware (doc/registration.md). Ground truth: the scene's
 // static equilibrium (the pre-operative model), then the same model lifted by a known force on
 // the underside of the right lobe, ramped over the frames (a retractor lifting the liver). Each
 // frame a camera renders a partial, noisy cloud of the ground truth's visible surface
