@@ -128,6 +128,11 @@ class MechanicalModel {
   std::vector<int> select_nodes(const Region& r, const std::string& what) const;
   std::vector<int> select_triangles(const Region& r, const std::string& what) const;
   void set_fixed(const std::vector<int>& nodes);
+  // f (of `size`) = the sum over the tetrahedra, four at a time, and the active membranes of the
+  // element vectors tet_block(first, count, fe) and triangle(t, fm) write; returns the sum of
+  // what they return (an energy).
+  template <typename TetBlock, typename Triangle>
+  double element_pass(Eigen::Index size, Eigen::VectorXd& f, const TetBlock& tet_block, const Triangle& triangle);
 
   TetMesh mesh_;
   Eigen::MatrixX3i boundary_;

@@ -203,30 +203,25 @@ void MechanicalModel::reset() {
   surface_targets_.clear();
 }
 
-void MechanicalModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
-  // The last evaluation is kept: a step starts where the previous one ended, and the energy
-  // check looks at the state the line search accepted.
-  if (evaluated_at(x)) {
-    f = internal_at_;
-    return;
-  }
-  f.setZero(x.size());
-  if (capsule_.enabled) membrane_.update_rotations(x);  // the tetrahedra's rotations come with their forces
-  // Elements split over the cores, each thread adding into its own force vector (thread 0
-  // into f); the vectors are summed in a fixed order, so a result depends only on the thread count.
+template <typename TetBlock, typename Triangle>
+double MechanicalModel::element_pass(Eigen::Index size, Eigen::VectorXd& f, const TetBlock& tet_block,
+                                     const Triangle& triangle) {
+  f.setZero(size);
   const int active = static_cast<int>(capsule_active_.size());
+  // Elements split over the cores, each thread adding into its own force vector (thread 0 into
+  // f); the vectors are summed in a fixed order, so a result depends only on the thread count.
 #pragma omp parallel num_threads(threads_)
   {
     const int thread = omp_get_thread_num();
     Eigen::VectorXd& ft = thread == 0 ? f : thread_forces_[thread];
-    if (thread > 0) ft.setZero(x.size());
-    double energy = 0;  // the strain energy comes with the forces, at little extra cost
+    if (thread > 0) ft.setZero(size);
+    double sum = 0;
     Vector12d fe[4];
     const int tetrahedra = tetra_.size();
 #pragma omp for schedule(static) nowait
     for (int block = 0; block < (tetrahedra + 3) / 4; ++block) {  // four at a time: see polar_rotations
       const int first = 4 * block, count = std::min(4, tetrahedra - first);
-      energy += tetra_.element_forces(first, count, x, fe);
+      sum += tet_block(first, count, fe);
       for (int i = 0; i < count; ++i)
         for (int k = 0; k < 4; ++k) ft.segment<3>(3 * mesh_.T(first + i, k)) += fe[i].segment<3>(3 * k);
     }
@@ -235,17 +230,32 @@ void MechanicalModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd&
 #pragma omp for schedule(static) nowait
       for (int i = 0; i < active; ++i) {
         const int t = capsule_active_[i];
-        energy += membrane_.element_force(t, x, fm);
+        sum += triangle(t, fm);
         for (int k = 0; k < 3; ++k) ft.segment<3>(3 * boundary_(t, k)) += fm.segment<3>(3 * k);
       }
     }
-    thread_energy_[thread] = energy;
+    thread_energy_[thread] = sum;
   }
-  tissue_energy_at_ = thread_energy_[0];
+  double total = thread_energy_[0];
   for (int thread = 1; thread < threads_; ++thread) {
     f += thread_forces_[thread];
-    tissue_energy_at_ += thread_energy_[thread];
+    total += thread_energy_[thread];
   }
+  return total;
+}
+
+void MechanicalModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
+  // The last evaluation is kept: a step starts where the previous one ended, and the energy
+  // check looks at the state the line search accepted.
+  if (evaluated_at(x)) {
+    f = internal_at_;
+    return;
+  }
+  if (capsule_.enabled) membrane_.update_rotations(x);  // the tetrahedra's rotations come with their forces
+  // The strain energy comes with the forces, at little extra cost.
+  tissue_energy_at_ = element_pass(
+      x.size(), f, [&](int first, int count, Vector12d* fe) { return tetra_.element_forces(first, count, x, fe); },
+      [&](int t, Vector9d& fm) { return membrane_.element_force(t, x, fm); });
   if (!vessels_.empty()) vessels_.add_forces(x, f);
   rotations_at_ = x;
   internal_at_ = f;
@@ -317,33 +327,16 @@ void MechanicalModel::snapshot_damping(const Eigen::VectorXd& x) {
 }
 
 void MechanicalModel::damping_forces(const Eigen::VectorXd& v, Eigen::VectorXd& f) {
-  f.setZero(v.size());
-  const int active = static_cast<int>(capsule_active_.size());
-#pragma omp parallel num_threads(threads_)
-  {  // as internal_forces: per-thread vectors summed in a fixed order
-    const int thread = omp_get_thread_num();
-    Eigen::VectorXd& ft = thread == 0 ? f : thread_forces_[thread];
-    if (thread > 0) ft.setZero(v.size());
-    Vector12d fe[4];
-    const int tetrahedra = tetra_.size();
-#pragma omp for schedule(static) nowait
-    for (int block = 0; block < (tetrahedra + 3) / 4; ++block) {
-      const int first = 4 * block, count = std::min(4, tetrahedra - first);
-      tetra_.tangent_products(first, count, damping_.tet_rotation, v, fe);
-      for (int i = 0; i < count; ++i)
-        for (int k = 0; k < 4; ++k) ft.segment<3>(3 * mesh_.T(first + i, k)) += fe[i].segment<3>(3 * k);
-    }
-    if (capsule_.enabled) {
-      Vector9d fm;
-#pragma omp for schedule(static) nowait
-      for (int i = 0; i < active; ++i) {
-        const int t = capsule_active_[i];
+  element_pass(
+      v.size(), f,
+      [&](int first, int count, Vector12d* fe) {
+        tetra_.tangent_products(first, count, damping_.tet_rotation, v, fe);
+        return 0.0;
+      },
+      [&](int t, Vector9d& fm) {
         membrane_.tangent_product(t, damping_.membrane_frame[t], v, fm);
-        for (int k = 0; k < 3; ++k) ft.segment<3>(3 * boundary_(t, k)) += fm.segment<3>(3 * k);
-      }
-    }
-  }
-  for (int thread = 1; thread < threads_; ++thread) f += thread_forces_[thread];
+        return 0.0;
+      });
   vessels_.add_damping_forces(v, f);
 }
 
