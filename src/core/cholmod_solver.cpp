@@ -7,7 +7,9 @@ namespace liver_sim {
 
 CholmodSolver::CholmodSolver() {
   cholmod_start(&common_);
-  common_.supernodal = CHOLMOD_AUTO;
+  // Supernodal always (CHOLMOD would pick simplicial for tiny matrices): one factor layout for
+  // forward_unit to walk.
+  common_.supernodal = CHOLMOD_SUPERNODAL;
   // Both minimum degree and nested dissection are tried (the analysis is done once) and the
   // ordering with less fill kept: on the liver phantom METIS leaves 13% fewer nonzeros in L and
   // 31% fewer flops than AMD, which CHOLMOD's default would keep.
@@ -37,6 +39,7 @@ CholmodSolver::~CholmodSolver() {
   cholmod_free_dense(&x_, &common_);
   cholmod_free_dense(&Y_, &common_);
   cholmod_free_dense(&E_, &common_);
+  cholmod_free_dense(&half_, &common_);
   cholmod_free_factor(&factor_, &common_);
   cholmod_finish(&common_);
 }
@@ -61,6 +64,15 @@ void CholmodSolver::analyze(int n, const std::vector<int>& column_start,
   ++analyses_;
   if (!factor_ || common_.status < CHOLMOD_OK)
     throw std::runtime_error("CHOLMOD analysis failed (status " + std::to_string(common_.status) + ")");
+  const int* perm = static_cast<const int*>(factor_->Perm);
+  inverse_perm_.resize(n);
+  for (int k = 0; k < n; ++k) inverse_perm_[perm[k]] = k;
+  const int* super = static_cast<const int*>(factor_->super);
+  supernode_of_.resize(n);
+  for (size_t k = 0; k < factor_->nsuper; ++k)
+    for (int j = super[k]; j < super[k + 1]; ++j) supernode_of_[j] = static_cast<int>(k);
+  unit_work_.setZero(n);
+  permuted_.resize(n);
 }
 
 bool CholmodSolver::factorize(const std::vector<double>& values) {
@@ -99,6 +111,101 @@ void CholmodSolver::solve_columns(const double* b, long columns) {
   B.xtype = CHOLMOD_REAL;
   B.dtype = CHOLMOD_DOUBLE;
   cholmod_solve2(CHOLMOD_A, factor_, &B, nullptr, &x_, nullptr, &Y_, &E_, &common_);
+}
+
+cholmod_dense CholmodSolver::view(const double* data) const {
+  cholmod_dense B{};
+  B.nrow = factor_->n;
+  B.ncol = 1;
+  B.nzmax = B.nrow;
+  B.d = B.nrow;
+  B.x = const_cast<double*>(data);
+  B.xtype = CHOLMOD_REAL;
+  B.dtype = CHOLMOD_DOUBLE;
+  return B;
+}
+
+void CholmodSolver::forward(const Eigen::VectorXd& b, Eigen::VectorXd& z) {
+  if (!factorized_) throw std::logic_error("CholmodSolver::forward without a valid factor");
+  const int* perm = static_cast<const int*>(factor_->Perm);
+  for (Eigen::Index k = 0; k < b.size(); ++k) permuted_[k] = b[perm[k]];
+  cholmod_dense B = view(permuted_.data());
+  cholmod_solve2(CHOLMOD_L, factor_, &B, nullptr, &half_, nullptr, &Y_, &E_, &common_);
+  z = Eigen::Map<const Eigen::VectorXd>(static_cast<double*>(half_->x), b.size());
+}
+
+void CholmodSolver::backward(const Eigen::VectorXd& z, Eigen::VectorXd& x) {
+  if (!factorized_) throw std::logic_error("CholmodSolver::backward without a valid factor");
+  cholmod_dense Z = view(z.data());
+  cholmod_solve2(CHOLMOD_Lt, factor_, &Z, nullptr, &half_, nullptr, &Y_, &E_, &common_);
+  const double* y = static_cast<const double*>(half_->x);
+  const int* perm = static_cast<const int*>(factor_->Perm);
+  x.resize(z.size());
+  for (Eigen::Index k = 0; k < z.size(); ++k) x[perm[k]] = y[k];
+}
+
+void CholmodSolver::forward_unit(int i, SparseColumn& y) {
+  if (!factorized_) throw std::logic_error("CholmodSolver::forward_unit without a valid factor");
+  const int* super = static_cast<const int*>(factor_->super);
+  const int* pi = static_cast<const int*>(factor_->pi);
+  const int* px = static_cast<const int*>(factor_->px);
+  const int* rows = static_cast<const int*>(factor_->s);
+  const double* L = static_cast<const double*>(factor_->x);
+  y.supernodes.clear();
+  y.offsets.clear();
+  int length = 0;
+  const int start = inverse_perm_[i];
+  for (int k = supernode_of_[start];;) {
+    y.supernodes.push_back(k);
+    y.offsets.push_back(length);
+    length += super[k + 1] - super[k];
+    const int nsrow = pi[k + 1] - pi[k];
+    if (nsrow == super[k + 1] - super[k]) break;  // the root
+    k = supernode_of_[rows[pi[k] + super[k + 1] - super[k]]];
+  }
+  y.values.resize(length);
+  double* w = unit_work_.data();
+  w[start] = 1.0;
+  for (size_t p = 0; p < y.supernodes.size(); ++p) {
+    const int k = y.supernodes[p];
+    const int k1 = super[k], nscol = super[k + 1] - k1, nsrow = pi[k + 1] - pi[k];
+    // The supernode's block: column-major nsrow x nscol, its first nscol rows the diagonal block.
+    const Eigen::Map<const Eigen::MatrixXd> block(L + px[k], nsrow, nscol);
+    Eigen::Map<Eigen::VectorXd> yk(y.values.data() + y.offsets[p], nscol);
+    yk = Eigen::Map<const Eigen::VectorXd>(w + k1, nscol);
+    block.topRows(nscol).triangularView<Eigen::Lower>().solveInPlace(yk);
+    below_.noalias() = block.bottomRows(nsrow - nscol) * yk;
+    for (int r = nscol; r < nsrow; ++r) w[rows[pi[k] + r]] -= below_[r - nscol];
+    std::fill(w + k1, w + k1 + nscol, 0.0);
+  }
+}
+
+double CholmodSolver::dot(const SparseColumn& a, const SparseColumn& b) const {
+  // The shared part of two paths is the same chain of supernodes from their meeting point up,
+  // stored last in both, in the same order.
+  size_t i = a.supernodes.size(), j = b.supernodes.size();
+  while (i > 0 && j > 0 && a.supernodes[i - 1] == b.supernodes[j - 1]) --i, --j;
+  if (i == a.supernodes.size()) return 0.0;
+  const Eigen::Index length = a.values.size() - a.offsets[i];
+  return a.values.tail(length).dot(b.values.tail(length));
+}
+
+double CholmodSolver::dot(const SparseColumn& a, const Eigen::VectorXd& z) const {
+  const int* super = static_cast<const int*>(factor_->super);
+  double s = 0;
+  for (size_t p = 0; p < a.supernodes.size(); ++p) {
+    const int k = a.supernodes[p], nscol = super[k + 1] - super[k];
+    s += a.values.segment(a.offsets[p], nscol).dot(z.segment(super[k], nscol));
+  }
+  return s;
+}
+
+void CholmodSolver::add(const SparseColumn& a, double s, Eigen::VectorXd& z) const {
+  const int* super = static_cast<const int*>(factor_->super);
+  for (size_t p = 0; p < a.supernodes.size(); ++p) {
+    const int k = a.supernodes[p], nscol = super[k + 1] - super[k];
+    z.segment(super[k], nscol) += s * a.values.segment(a.offsets[p], nscol);
+  }
 }
 
 double CholmodSolver::factor_nonzeros() const { return common_.lnz; }
