@@ -20,6 +20,18 @@ struct SurfaceDistance {
 SurfaceDistance surface_distance(const InstrumentOptions& shape, const Eigen::Isometry3d& pose,
                                  const Eigen::Vector3d& x);
 
+// The point of triangle (a, b, c) deepest inside the instrument, or nearest to it when outside:
+// where surface_distance is least over the triangle, as barycentric weights, with that distance
+// and normal. The whole triangle is at least that far from the instrument. Exact for the sphere
+// and the shaft (closest points to the tip or the axis); for the tube, the best of the corners,
+// edge midpoints and centroid, improved by steps along -normal projected onto the triangle.
+struct TrianglePoint {
+  Eigen::Vector3d weights = Eigen::Vector3d(1, 0, 0);
+  SurfaceDistance distance;
+};
+TrianglePoint deepest_point(const InstrumentOptions& shape, const Eigen::Isometry3d& pose, const Eigen::Vector3d& a,
+                            const Eigen::Vector3d& b, const Eigen::Vector3d& c);
+
 // Is the point inside the tube's lumen cross-section (radius < inner_radius) and in front of
 // the opening by at most the wall thickness, on a surface facing into the tube? (suction)
 bool in_tube_lumen(const InstrumentOptions& tube, const Eigen::Isometry3d& pose, const Eigen::Vector3d& x,

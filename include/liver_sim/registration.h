@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "liver_sim/closest_points.h"
 #include "liver_sim/liver_model.h"
 
 namespace liver_sim {
@@ -69,9 +70,6 @@ class SurfaceLocator {
   pcl::KdTreeFLANN<pcl::PointXYZ> tree_;
 };
 
-// The closest point of triangle (a, b, c) to p: its barycentric weights.
-Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                                    const Eigen::Vector3d& c);
 
 // Cloud preparation, shared by register_cloud and the node's callback: points moved by
 // `transform` (into the model frame), the non-finite ones dropped, those outside `box` dropped,

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+
+#include "liver_sim/closest_points.h"
 
 namespace liver_sim {
 namespace {
@@ -63,6 +66,49 @@ SurfaceDistance surface_distance(const InstrumentOptions& shape, const Eigen::Is
     }
   }
   return {};
+}
+
+TrianglePoint deepest_point(const InstrumentOptions& shape, const Eigen::Isometry3d& pose, const Eigen::Vector3d& a,
+                            const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  auto at = [&](const Eigen::Vector3d& w) { return Eigen::Vector3d(w[0] * a + w[1] * b + w[2] * c); };
+  TrianglePoint best;
+  switch (shape.type) {
+    case InstrumentOptions::Type::Probe:
+    case InstrumentOptions::Type::Grasper:
+      best.weights = closest_on_triangle(pose.translation(), a, b, c);
+      break;
+    case InstrumentOptions::Type::Shaft: {
+      const Eigen::Vector3d tip = pose.translation();
+      best.weights = closest_segment_triangle(tip, tip + shape.length * pose.linear().col(2), a, b, c).weights;
+      break;
+    }
+    case InstrumentOptions::Type::Tube: {
+      // The wall is not convex: a local search from the best of seven points.
+      double least = std::numeric_limits<double>::infinity();
+      for (const Eigen::Vector3d& w :
+           {Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(0, 1, 0), Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(0.5, 0.5, 0),
+            Eigen::Vector3d(0, 0.5, 0.5), Eigen::Vector3d(0.5, 0, 0.5), Eigen::Vector3d(1.0 / 3, 1.0 / 3, 1.0 / 3)}) {
+        const double d = surface_distance(shape, pose, at(w)).distance;
+        if (d < least) {
+          least = d;
+          best.weights = w;
+        }
+      }
+      double step = 0.25 * (shape.outer_radius - shape.inner_radius);
+      for (int k = 0; k < 12; ++k) {
+        const SurfaceDistance here = surface_distance(shape, pose, at(best.weights));
+        const Eigen::Vector3d w = closest_on_triangle(at(best.weights) - std::max(step, here.distance) * here.normal, a, b, c);
+        if (surface_distance(shape, pose, at(w)).distance < here.distance) {
+          best.weights = w;
+        } else {
+          step *= 0.5;
+        }
+      }
+      break;
+    }
+  }
+  best.distance = surface_distance(shape, pose, at(best.weights));
+  return best;
 }
 
 bool in_tube_lumen(const InstrumentOptions& tube, const Eigen::Isometry3d& pose, const Eigen::Vector3d& x,
