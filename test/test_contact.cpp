@@ -111,8 +111,8 @@ TEST(Probe, PressedIntoBlockBalancesTheSupports) {
 
 // Pressed with friction 0.4 and dragged along x along a scene trajectory (static pseudo-time,
 // dt = 1 per step): a short drag sticks (the node under the probe moves with it and the
-// tangential force stays inside the cone); a long one slides (the force sits on the cone, |Ft| =
-// mu Fn, and the node lags behind the probe).
+// tangential force of its contact stays inside the cone); a long one slides (every contact's
+// force sits on the cone, |Ft| = mu Fn, and the node lags behind the probe).
 TEST(Probe, DragSticksBelowCoulombAndSlidesAbove) {
   const double L = 0.02, r = 0.005, mu = 0.4;
   Scene s = block_scene(3000, 0.3, mu);
@@ -132,11 +132,18 @@ TEST(Probe, DragSticksBelowCoulombAndSlidesAbove) {
     if ((m.mesh().V.row(i).transpose() - Eigen::Vector3d(L / 2, L / 2, L)).norm() < 1e-9) top = i;
   ASSERT_GE(top, 0);
 
-  // Per contact node: the force on it, split along the probe's normal there.
-  auto split = [&](int i) {
-    const Eigen::Vector3d f = m.contact().forces().segment<3>(3 * i);
-    const Eigen::Vector3d n = (node(m, i) - m.contact().pose(0).translation()).normalized();
-    return std::make_pair(f.dot(n), (f - f.dot(n) * n).norm());
+  // Per contact: the force at its surface point, split along the probe's normal there.
+  auto split = [&](const InstrumentContact::Contact& c) {
+    const Eigen::Vector3d n = (c.point.at(m.positions()) - m.contact().pose(0).translation()).normalized();
+    const Eigen::Vector3d force = c.frame * c.lambda;
+    return std::make_pair(force.dot(n), (force - force.dot(n) * n).norm());
+  };
+  // The contact at the node under the probe's centre.
+  auto at_top = [&]() {
+    for (const InstrumentContact::Contact& c : m.contact().contacts())
+      if (c.point.count == 1 && c.point.nodes[0] == top) return c;
+    ADD_FAILURE() << "no contact at the top node";
+    return m.contact().contacts().front();
   };
   ASSERT_TRUE(m.step().converged());
   const Eigen::Vector3d before = node(m, top);
@@ -145,17 +152,17 @@ TEST(Probe, DragSticksBelowCoulombAndSlidesAbove) {
   const Eigen::Vector3d F = m.instrument_reaction(0).force;
   EXPECT_NEAR(node(m, top).x() - before.x(), 0.00002, kTolerance) << "sticks: moves with the probe";
   EXPECT_GT(std::abs(F.x()), 0.0);
-  const auto [fn, ft] = split(top);
+  const auto [fn, ft] = split(at_top());
   EXPECT_LT(ft, 0.9 * mu * fn) << "inside the cone";
 
   const Eigen::Vector3d before_drag = node(m, top);
   const StepResult large = m.step();
   ASSERT_TRUE(large.converged()) << large.message;
   int sliding = 0;
-  for (int i = 0; i < m.mesh().V.rows(); ++i) {
-    const auto [n_i, t_i] = split(i);
+  for (const InstrumentContact::Contact& c : m.contact().contacts()) {
+    const auto [n_i, t_i] = split(c);
     if (n_i == 0) continue;
-    EXPECT_NEAR(t_i, mu * n_i, 1e-6 * mu * n_i) << "node " << i << " slides: on the cone";
+    EXPECT_NEAR(t_i, mu * n_i, 1e-6 * mu * n_i) << "contact at node " << c.point.nodes[0] << " slides: on the cone";
     ++sliding;
   }
   EXPECT_EQ(sliding, m.instrument_reaction(0).contacts);
@@ -248,7 +255,7 @@ TEST(Tube, AspirationBalancesAndTheCapsuleHalvesTheLift) {
     EXPECT_GT(tube.force.z(), 0.0) << "the rim holds the tissue down: the tissue pushes the tube up";
     Eigen::VectorXd suction;
     m.mechanics().external_forces(m.positions(), suction);
-    const Eigen::Vector3d sum = total(m.stepper().support_forces()) + total(m.contact().forces()) + total(suction);
+    const Eigen::Vector3d sum = total(m.stepper().support_forces()) + total(m.contact().forces(m.positions())) + total(suction);
     EXPECT_LE(sum.norm(), 1e-6 * tube.force.norm()) << sum.transpose();
     for (int i = 0; i < m.mesh().V.rows(); ++i)
       ASSERT_GE(surface_distance(m.instrument(0), m.contact().pose(0), node(m, i)).distance, -kTolerance) << i;

@@ -44,7 +44,11 @@ struct Scene {
 // A relative mesh file is resolved against the scene file's folder.
 Scene load_scene(const std::string& path, const std::vector<std::string>& overrides = {});
 
-// Same, from YAML text; `base_dir` resolves relative mesh paths, `origin` names the source
+// Instruments alone, from a YAML file with an `instruments:` list in the scene format (a
+// benchmark's scenario added to a scene). Throws SceneError naming the file and the key.
+std::vector<InstrumentOptions> load_instruments(const std::string& path);
+
+// Same as load_scene, from YAML text; `base_dir` resolves relative mesh paths, `origin` names the source
 // in error messages.
 Scene parse_scene(const std::string& yaml, const std::string& base_dir, const std::string& origin,
                   const std::vector<std::string>& overrides = {});

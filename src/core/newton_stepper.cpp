@@ -91,7 +91,8 @@ double NewtonStepper::work_over_step() {
   // at the end of the step times the displacement (they move only the nodes they touch).
   mechanics_.external_forces(x_start_, f_ext_);
   mechanics_.external_forces(x_, energy_work_);
-  f_ext_ = 0.5 * load_scale_ * (f_ext_ + energy_work_) + contact_.forces();
+  f_ext_ = 0.5 * load_scale_ * (f_ext_ + energy_work_);
+  contact_.add_forces(x_, f_ext_);
   if (!mechanics_.surface_targets().empty()) {
     energy_work_.setZero();
     mechanics_.add_target_forces(x_start_, energy_work_);
@@ -115,7 +116,7 @@ double NewtonStepper::residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, dou
   // All DOFs: under prescribed displacements alone the reactions are the force scale.
   const double internal_norm = f_tmp_.norm();
   r -= f_tmp_;
-  if (contact_.active()) r += contact_.forces();
+  contact_.add_forces(x, r);
   if (solver_.mode == SolverOptions::Mode::Dynamic) {
     const double dt = solver_.dt;
     // Backward Euler: M (v - v_n)/dt + D v = f_ext - f_int, v = (x - x_n)/dt, D = a M + b K.
@@ -162,22 +163,23 @@ StepResult NewtonStepper::step() {
     contact_.begin_stage(k, stages, x_);
     // Dynamic: Newton starts from the predicted state (solver.predictor), whose error is
     // O(dt^2) or O(dt^3), not O(dt): one iteration of modified Newton then lands 100x closer to
-    // the converged step (doc/performance.md). Not with contacts: a predicted node could start
-    // inside an instrument.
-    if (dynamic && k == 1 && !contact_.active() && solver_.predictor != SolverOptions::Predictor::None) {
+    // the converged step (doc/performance.md). Not when the prediction carries a surface point
+    // deep into an instrument (its contact would push it out on the wrong side).
+    if (dynamic && k == 1 && solver_.predictor != SolverOptions::Predictor::None) {
       x_ += solver_.dt * v_;
       if (solver_.predictor == SolverOptions::Predictor::ConstantAcceleration) x_ += solver_.dt * (v_ - v_previous_);
-      // An instrument that moved in this step may touch the prediction: start at x_n then.
+      bool predicted = true;
       if (contact_.num_instruments() > 0) {
         contact_.detect(x_);
-        if (contact_.active()) {
+        if (contact_.deep(x_)) {
           x_ = x_start_;
           contact_.detect(x_);
+          predicted = false;
         }
       }
       // The rotations follow the prediction as a guess (warm polar iterations), when they are
       // those of x_n.
-      if (!contact_.active() && mechanics_.evaluated_at(x_start_)) {
+      if (predicted && mechanics_.evaluated_at(x_start_)) {
         mechanics_.predict_rotations(rotations_continued_);
         rotations_predicted = true;
       }
@@ -282,7 +284,10 @@ void NewtonStepper::newton(StepResult& result) {
     }
     ++result.iterations;
     using Strategy = SolverOptions::Strategy;
-    const Strategy strategy = contact_.active() ? Strategy::NewtonKrylov : solver_.strategy;
+    // With contacts, the strategies that solve with the factor carry the contact forces in the
+    // same solve; the others become Newton-Krylov, which has the factor too.
+    const bool direct = solver_.strategy == Strategy::ModifiedNewton || solver_.strategy == Strategy::FullNewton;
+    const Strategy strategy = contact_.active() && !direct ? Strategy::NewtonKrylov : solver_.strategy;
     const bool current_tangent = strategy == Strategy::FullNewton || strategy == Strategy::FullNewtonEigen ||
                                  strategy == Strategy::ReusedFactorCG || strategy == Strategy::CG;
     if (strategy == Strategy::FullNewton) factor_valid_ = false;
@@ -344,7 +349,11 @@ void NewtonStepper::newton(StepResult& result) {
       mechanics_.pattern().multiply(system_, v, out);
     };
     int krylov = 0;
-    if (strategy == Strategy::FullNewton || strategy == Strategy::ModifiedNewton) {
+    if (direct && contact_.active()) {
+      const auto t_contact = Clock::now();
+      result.contact_sweeps += contact_.direct_update(cholmod_, r_, dx_).sweeps;
+      result.timing.contact_ms += ms_since(t_contact);
+    } else if (strategy == Strategy::FullNewton || strategy == Strategy::ModifiedNewton) {
       cholmod_.solve(r_, dx_);
     } else if (strategy == Strategy::FullNewtonEigen) {
       dx_ = eigen_ldlt_.solve(r_);
@@ -361,7 +370,7 @@ void NewtonStepper::newton(StepResult& result) {
       if (krylov > kRefactorAfter || gmres_.relative_residual() > forcing) factor_valid_ = false;
     } else {
       const auto t_contact = Clock::now();
-      const InstrumentContact::Update update = contact_.newton_update(cholmod_, jacobian, r_, forcing, dx_);
+      const InstrumentContact::Update update = contact_.krylov_update(cholmod_, jacobian, r_, forcing, dx_);
       result.contact_sweeps += update.sweeps;
       krylov = update.krylov;
       result.timing.contact_ms += ms_since(t_contact);
@@ -387,8 +396,14 @@ void NewtonStepper::newton(StepResult& result) {
     double ref_try = reference;
     const int max_halvings = solver_.line_search ? 6 : 0;
     bool accepted = false;  // a trial passed the merit or the potential test
+    // With the direct contact update the trial point carries the same share of the contact
+    // force change: a capped real-time frame then ends where its force balance is (without it,
+    // 38 of 300 haptic frames rolled back as stalled). The Krylov update keeps its forces:
+    // scaled, its steps took twice the iterations (bench, probe on the cube).
+    const bool contact_update = contact_.active() && direct;
     for (int h = 0;; ++h) {
       x_try_ = x_ + alpha * dx_;
+      if (contact_update) contact_.scale_update(alpha);
       const double n_try = residual(x_try_, r_try_, &ref_try);
       const double m_try = merit(n_try, x_try_);
       const bool merit_falls = m_try <= (1.0 - 1e-4 * alpha) * current_merit;
@@ -405,6 +420,7 @@ void NewtonStepper::newton(StepResult& result) {
     // None was good enough: take the best one tried.
     if (best_alpha != alpha) {
       x_try_ = x_ + best_alpha * dx_;
+      if (contact_update) contact_.scale_update(best_alpha);
       best_norm = residual(x_try_, r_try_, &ref_try);
     }
     result.timing.assembly_ms += ms_since(t0);
@@ -419,6 +435,7 @@ void NewtonStepper::newton(StepResult& result) {
       refreshed = true;
       factor_valid_ = false;
       --result.iterations;
+      if (contact_update) contact_.scale_update(0.0);
       norm = residual(x_, r_, &reference);
       continue;
     }

@@ -122,6 +122,14 @@ class Reader {
     return r;
   }
 
+  std::vector<InstrumentOptions> instruments(const YAML::Node& list) const {
+    if (!list.IsSequence()) fail("instruments", "expected a list of instruments");
+    std::set<std::string> names;
+    std::vector<InstrumentOptions> out;
+    for (size_t i = 0; i < list.size(); ++i) out.push_back(instrument(list[i], "instruments." + std::to_string(i), names));
+    return out;
+  }
+
   Scene scene(const YAML::Node& root, const std::string& base_dir) const {
     if (!root.IsMap()) fail("", "expected a map of sections");
     check_keys(root, "", {"mesh", "parenchyma", "capsule", "fixed", "loads", "solver", "probes", "vessels",
@@ -174,11 +182,7 @@ class Reader {
       std::set<std::string> names;
       for (size_t i = 0; i < v.size(); ++i) s.vessels.push_back(vessel(v[i], "vessels." + std::to_string(i), base_dir, names));
     }
-    if (const YAML::Node in = root["instruments"]) {
-      if (!in.IsSequence()) fail("instruments", "expected a list of instruments");
-      std::set<std::string> names;
-      for (size_t i = 0; i < in.size(); ++i) s.instruments.push_back(instrument(in[i], "instruments." + std::to_string(i), names));
-    }
+    if (const YAML::Node in = root["instruments"]) s.instruments = instruments(in);
     if (const YAML::Node c = root["contact"]) {
       check_keys(c, "contact", {"friction", "alarm_distance", "tolerance", "max_iterations"});
       if (c["friction"]) s.contact.friction = number(c["friction"], "contact.friction");
@@ -464,6 +468,23 @@ Scene parse_scene(const std::string& yaml, const std::string& base_dir, const st
     return reader.scene(root, base_dir);
   } catch (const YAML::Exception& e) {
     reader.fail("", e.what());
+  }
+}
+
+std::vector<InstrumentOptions> load_instruments(const std::string& path) {
+  const Reader reader(path);
+  std::ifstream in(path);
+  if (!in) throw SceneError(path + ": cannot open");
+  std::stringstream text;
+  text << in.rdbuf();
+  if (text.str().size() > (1u << 20)) reader.fail("", "larger than 1 MiB");
+  try {
+    const YAML::Node root = YAML::Load(text.str());
+    if (!root.IsMap()) reader.fail("", "expected a map with an instruments list");
+    reader.check_keys(root, "", {"instruments"});
+    return reader.instruments(reader.required(root, "", "instruments"));
+  } catch (const YAML::Exception& e) {
+    reader.fail("", std::string("YAML syntax: ") + e.what());
   }
 }
 

@@ -1,10 +1,13 @@
 // Run time against error (doc/performance.md). The scenario: the scene's static
 // equilibrium (solved once, tightly), then dynamic frames of solver.dt in which the scene's loads
 // breathe, scaled by 1 + A sin(2 pi f t) (suction on the cube, gravity on the liver: the smooth
-// inputs of an OR session). Each solver strategy runs it, every frame timed, and its displacement
-// field is compared with a converged reference run (Newton-Krylov to a residual of 1e-10).
-//   bench --scene FILE [--set K=V]... [--frames N] [--amplitude A] [--frequency F]
-//         [--strategy SPEC]... [--csv FILE] [--quiet]
+// inputs of an OR session), and the instruments of --instruments (a YAML file with an
+// `instruments:` list in the scene format: a probe pressing and sweeping, a grasper lifting) move
+// along their trajectories from the start of the frames. Each solver strategy runs it, every frame
+// timed, and its displacement field is compared with a converged reference run (Newton-Krylov to
+// a residual of 1e-10).
+//   bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]
+//         [--frequency F] [--strategy SPEC]... [--csv FILE] [--quiet]
 // SPEC is STRATEGY[:ITERATIONS[:TOLERANCE]]: the solver.strategy, the Newton iterations allowed
 // per frame (solver.max_iterations) and the residual tolerance (solver.tolerance; 0 means "always
 // do ITERATIONS"). One CSV row per strategy on standard output (or --csv), progress on stderr.
@@ -28,8 +31,8 @@ using liver_sim::Scene;
 using liver_sim::StepResult;
 
 const char* kUsage =
-    "usage: bench --scene FILE [--set K=V]... [--frames N] [--amplitude A] [--frequency HZ]\n"
-    "             [--strategy STRATEGY[:ITERATIONS[:TOLERANCE]]]... [--csv FILE] [--quiet]\n"
+    "usage: bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]\n"
+    "             [--frequency HZ] [--strategy STRATEGY[:ITERATIONS[:TOLERANCE]]]... [--csv FILE] [--quiet]\n"
     "  strategies: newton_krylov, full_newton, full_newton_eigen, reused_factor_cg, cg, modified_newton\n";
 
 struct Spec {
@@ -42,6 +45,7 @@ struct Run {
   std::vector<double> frame_ms;
   std::vector<Eigen::VectorXd> displacement;  // per frame
   int newton_iterations = 0, factorizations = 0, linear_iterations = 0, diverged = 0;
+  long contacts = 0;  // loaded contacts, summed over the frames
   double factorization_ms = 0;
   std::string first_rollback;  // why the first rolled-back frame was
   long tets = 0, dofs = 0;
@@ -61,6 +65,7 @@ Spec parse_spec(const std::string& s) {
 struct Loading {
   int frames = 100;
   double amplitude = 0.5, frequency = 1.0;  // -, Hz
+  std::vector<liver_sim::InstrumentOptions> instruments;  // added to the scene's
 };
 
 // The scene's static equilibrium, to a residual of 1e-10.
@@ -84,7 +89,8 @@ Run run(const std::string& scene_path, std::vector<std::string> overrides, const
   std::ostringstream tol;
   tol << std::setprecision(17) << (spec.tolerance > 0 ? spec.tolerance : 1e-300);
   overrides.push_back("solver.tolerance=" + tol.str());
-  const Scene scene = liver_sim::load_scene(scene_path, overrides);
+  Scene scene = liver_sim::load_scene(scene_path, overrides);
+  scene.instruments.insert(scene.instruments.end(), loading.instruments.begin(), loading.instruments.end());
   LiverModel model(liver_sim::load_scene_mesh(scene), scene);
   model.set_positions(start);
   Run r;
@@ -100,6 +106,7 @@ Run run(const std::string& scene_path, std::vector<std::string> overrides, const
     r.factorizations += s.factorizations;
     r.linear_iterations += s.linear_iterations;
     r.factorization_ms += s.timing.factorization_ms;
+    r.contacts += s.contacts;
     if (s.status == StepResult::Status::Diverged && r.diverged++ == 0) r.first_rollback = s.message;
   }
   if (!quiet)
@@ -126,6 +133,7 @@ int main_checked(int argc, char** argv) {
     const bool has_value = i + 1 < argc;
     if (a == "--scene" && has_value) scene = argv[++i];
     else if (a == "--set" && has_value) overrides.push_back(argv[++i]);
+    else if (a == "--instruments" && has_value) loading.instruments = liver_sim::load_instruments(argv[++i]);
     else if (a == "--frames" && has_value) loading.frames = std::stoi(argv[++i]);
     else if (a == "--amplitude" && has_value) loading.amplitude = std::stod(argv[++i]);
     else if (a == "--frequency" && has_value) loading.frequency = std::stod(argv[++i]);
@@ -153,7 +161,7 @@ int main_checked(int argc, char** argv) {
   if (!csv.empty()) file.open(csv);
   std::ostream& out = csv.empty() ? std::cout : file;
   out << "scene,tetrahedra,dofs,strategy,iterations,tolerance,frames,median_ms,mean_ms,p95_ms,fps,max_error,"
-         "final_error,newton_iterations,linear_iterations,factorizations,factorization_ms,diverged\n"
+         "final_error,newton_iterations,linear_iterations,factorizations,factorization_ms,diverged,contacts\n"
       << std::setprecision(6);
   for (const Spec& spec : specs) {
     const Run r = run(scene, overrides, spec, loading, start, quiet);
@@ -168,7 +176,7 @@ int main_checked(int argc, char** argv) {
         << percentile(r.frame_ms, 0.95) << ',' << 1000.0 / mean << ',' << max_error / peak << ','
         << final_error / peak << ',' << r.newton_iterations << ',' << r.linear_iterations << ','
         << r.factorizations << ',' << (r.factorizations ? r.factorization_ms / r.factorizations : 0.0) << ','
-        << r.diverged << '\n';
+        << r.diverged << ',' << static_cast<double>(r.contacts) / frames << '\n';
   }
   return 0;
 }
