@@ -35,9 +35,8 @@ struct SurfaceRepairs {
 // and vertices, coordinates) for: no triangles, a non-finite coordinate, an index out of range,
 // coordinates too large to handle in double precision, an open boundary (an edge of one triangle
 // only), a non-manifold edge (three or more triangles) or vertex (two sheets touching at a point),
-// a non-orientable shell, several disconnected shells (unless keep_largest_shell), a shell
-// enclosing no volume, two triangles crossing each other (self-intersection) or folded onto each
-// other across their edge.
+// a non-orientable shell, several disconnected shells (unless keep_largest_shell), two triangles
+// crossing each other (self-intersection) or folded onto each other across their edge.
 SurfaceMesh repair_surface(const SurfaceMesh& surface, const std::string& origin,
                            const SurfaceRepairOptions& options = {}, SurfaceRepairs* repairs = nullptr);
 

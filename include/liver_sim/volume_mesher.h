@@ -25,7 +25,8 @@ struct VolumeMeshOptions {
 
 struct VolumeMeshReport {
   double element_size = 0;  // m, the size the final pass used
-  int passes = 0;           // volume meshings (up to two more when the first missed the count)
+  int passes = 0;           // volume meshings (more when one missed the count or failed)
+  bool curvature_sizing = true;  // false: gmsh failed with it and the mesh has a uniform size
 };
 
 // `surface`: closed, manifold, outward-oriented, in metres (repair_surface's output). Returns

@@ -204,7 +204,7 @@ void read_ply(ByteCursor& in, RawSurface& raw) {
     } else if (key == "element") {
       PlyElement e;
       e.name = in.token("element name");
-      e.count = in.count("element count", static_cast<long long>(in.remaining()));
+      e.count = in.count("element count", 1LL << 40);
       elements.push_back(e);
     } else if (key == "property") {
       if (elements.empty()) in.fail("property before any element");

@@ -40,13 +40,14 @@ int orientation(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen:
   return det > bound ? 1 : det < -bound ? -1 : 0;
 }
 
-// The open segment pq passes through the interior of triangle abc (a proper crossing).
+// Segment pq, with its ends strictly on both sides of the plane of triangle abc, passes through
+// the triangle (its edges and corners included: on a regular grid a fold meets them exactly).
 bool segment_crosses_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& a,
                               const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
   const int sp = orientation(a, b, c, p), sq = orientation(a, b, c, q);
   if (sp == 0 || sq == 0 || sp == sq) return false;
   const int s1 = orientation(p, q, a, b), s2 = orientation(p, q, b, c), s3 = orientation(p, q, c, a);
-  return s1 != 0 && s1 == s2 && s2 == s3;
+  return (s1 >= 0 && s2 >= 0 && s3 >= 0) || (s1 <= 0 && s2 <= 0 && s3 <= 0);
 }
 
 class SurfaceChecker {
@@ -95,10 +96,11 @@ class SurfaceChecker {
   // that cell size finds it among the 27 cells around); representatives are farther apart.
   void merge_vertices() {
     const double tol = options_.merge_distance > 0 ? options_.merge_distance : 1e-6 * diagonal_;
-    if (diagonal_ / tol > 1e7)
+    // Cell indices up to 2e6 per axis: three of them, offset by one, fit 21 bits each.
+    if (diagonal_ / tol > 2e6)
       refuse("merge distance " + number(tol) + " too small for the extent " + number(diagonal_));
     std::unordered_map<long long, std::vector<int>> cells;
-    auto key = [](long long x, long long y, long long z) { return (x * 20000003LL + y) * 20000003LL + z; };
+    auto key = [](long long x, long long y, long long z) { return ((x + 1) << 42) | ((y + 1) << 21) | (z + 1); };
     const int n = static_cast<int>(in_.V.rows());
     rep_.resize(n);
     for (int i = 0; i < n; ++i) {
@@ -127,7 +129,6 @@ class SurfaceChecker {
   }
 
   void collect_triangles() {
-    std::vector<std::array<int, 3>> seen;
     std::unordered_map<long long, std::vector<int>> by_lowest;  // lowest vertex -> triangles kept
     int first_collapsed = -1;
     for (Eigen::Index t = 0; t < in_.F.rows(); ++t) {
@@ -197,12 +198,12 @@ class SurfaceChecker {
       }
       i = j;
     }
-    if (open > 0)
-      refuse("open boundary (a hole): " + std::to_string(open) + " edges belong to one triangle only, e.g. " +
-             first_open + "; close it in the segmentation tool (fill holes)");
     if (non_manifold > 0)
       refuse("non-manifold edge: " + std::to_string(non_manifold) + " edges have more than two triangles, e.g. " +
              first_non_manifold);
+    if (open > 0)
+      refuse("open boundary (a hole): " + std::to_string(open) + " edges belong to one triangle only, e.g. " +
+             first_open + "; close it in the segmentation tool (fill holes)");
   }
 
   // Breadth-first over each shell, turning triangles to agree with the first one; then the
@@ -246,8 +247,7 @@ class SurfaceChecker {
     }
     for (int t = 0; t < n; ++t)
       if (flip[t]) std::swap(faces_[t][1], faces_[t][2]);
-    // Twins follow their edges: edge k of a turned triangle is its old edge (2 - k) reversed... so
-    // rebuild them from the oriented faces.
+    // A turned triangle's sides are numbered anew: find the twins again.
     flipped_ = flip;
     rebuild_twins();
   }
@@ -294,10 +294,6 @@ class SurfaceChecker {
     const int shells = static_cast<int>(shell_volume_.size());
     const int largest =
         static_cast<int>(std::max_element(shell_volume_.begin(), shell_volume_.end()) - shell_volume_.begin());
-    for (int s = 0; s < shells; ++s)
-      if (!(shell_volume_[s] > 1e-12 * diagonal_ * diagonal_ * diagonal_))
-        refuse("shell of " + std::to_string(shell_size_[s]) + " triangles (from " + triangle(shell_seed_[s]) +
-               ") encloses no volume: it is flat");
     if (shells > 1 && !options_.keep_largest_shell) {
       std::ostringstream m;
       m << shells << " disconnected shells; enclosed volumes";
@@ -316,7 +312,7 @@ class SurfaceChecker {
       repairs_.notes.push_back(m.str());
     }
     std::vector<std::array<int, 3>> faces;
-    std::vector<int> source, twin_unused;
+    std::vector<int> source;
     int turned = 0;
     for (size_t t = 0; t < faces_.size(); ++t) {
       if (shell_[t] != largest && shells > 1) continue;
@@ -334,7 +330,6 @@ class SurfaceChecker {
       repairs_.notes.push_back("turned " + std::to_string(turned) +
                                " triangles to agree with their neighbours and face outward");
     }
-    rebuild_twins();
   }
 
   // Pairs of triangles whose boxes overlap, found by sorting (grid cell, triangle) entries; each
@@ -417,8 +412,12 @@ class SurfaceChecker {
     } else if (shared == 2) {
       // Neighbours across an edge overlap only when folded flat onto each other: coplanar with
       // their third vertices on the same side of the edge.
-      int u = -1, w = -1, a = -1, b = -1;
-      for (const int v : A) (std::count(B.begin(), B.end(), v) ? (u < 0 ? u : w) : a) = v;
+      int u = -1, w = -1, a = -1, b = -1;  // shared edge u-w, third vertices a (of A) and b (of B)
+      for (const int v : A) {
+        if (!std::count(B.begin(), B.end(), v)) a = v;
+        else if (u < 0) u = v;
+        else w = v;
+      }
       for (const int v : B)
         if (!std::count(A.begin(), A.end(), v)) b = v;
       if (orientation(P(u), P(w), P(a), P(b)) == 0) {
