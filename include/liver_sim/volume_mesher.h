@@ -30,7 +30,7 @@ struct VolumeMeshReport {
 };
 
 // `surface`: closed, manifold, outward-oriented, in metres (repair_surface's output). Returns
-// positively oriented tetrahedra. Throws MeshError naming `origin` with gmsh's message when gmsh
+// positively oriented tetrahedra (checked). Throws MeshError naming `origin` with gmsh's message when gmsh
 // fails.
 TetMesh mesh_volume(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
                     VolumeMeshReport* report = nullptr);

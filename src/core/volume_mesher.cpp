@@ -128,9 +128,7 @@ TetMesh extract(const std::string& origin) {
   m.V.resize(static_cast<Eigen::Index>(order.size()), 3);
   for (size_t i = 0; i < order.size(); ++i)
     for (int c = 0; c < 3; ++c) m.V(i, c) = coords[3 * order[i] + c];
-  for (Eigen::Index t = 0; t < m.T.rows(); ++t)
-    if (signed_volume(m.V, m.T, static_cast<int>(t)) < 0) std::swap(m.T(t, 2), m.T(t, 3));
-  validate_mesh(m, origin + ": gmsh's mesh");
+  validate_mesh(m, origin + ": gmsh's mesh");  // positively oriented, as gmsh makes them
   return m;
 }
 
