@@ -1,4 +1,5 @@
 // Readers and writers of triangle surfaces: STL, OBJ, PLY, legacy VTK polydata.
+#include <Eigen/Geometry>
 #include <array>
 #include <cmath>
 #include <cstdint>

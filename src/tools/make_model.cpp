@@ -47,6 +47,8 @@ const char* kUsage =
     "                        1,000,000 tetrahedra\n"
     "  --feature-angle DEG   surface creases sharper than this stay edges of the mesh, in [10, 90] degrees\n"
     "                        (default 40)\n"
+    "  --max-deviation D     curved parts get shorter edges (down to a quarter of the size) so that the\n"
+    "                        mesh stays within D of the surface, > 0 (input unit; default 0.5 mm)\n"
     "  --merge-distance D    vertices closer than D are merged, >= 0 (input unit; default 0: 1e-6 of the\n"
     "                        surface's bounding-box diagonal)\n"
     "  --largest-shell       several disconnected shells: keep the largest (by volume) instead of refusing\n"
@@ -81,6 +83,7 @@ struct Options {
   int elements = 10000;
   double size = 0;  // input unit
   double feature_angle = 40;
+  double max_deviation = -1;  // input unit; < 0: 0.5 mm
   double merge_distance = 0;  // input unit
   bool largest_shell = false;
   std::vector<std::string> landmarks;
@@ -151,6 +154,8 @@ Options parse_args(int argc, char** argv) {
       o.size = parse_number(a, value(), 0, 1e9, true);
     } else if (a == "--feature-angle") {
       o.feature_angle = parse_number(a, value(), 10, 90);
+    } else if (a == "--max-deviation") {
+      o.max_deviation = parse_number(a, value(), 0, 1e9, true);
     } else if (a == "--merge-distance") {
       o.merge_distance = parse_number(a, value(), 0, 1e9);
     } else if (a == "--largest-shell") {
@@ -249,6 +254,7 @@ int run(const Options& o) {
   mesh_options.element_size = o.size * o.unit;
   mesh_options.target_elements = o.elements;
   mesh_options.feature_angle = o.feature_angle;
+  mesh_options.max_deviation = o.max_deviation > 0 ? o.max_deviation * o.unit : 0.5e-3;
   mesh_options.progress = say;
   if (o.size > 0 && 4.9 * volume / std::pow(mesh_options.element_size, 3) > 1e6)
     throw CommandLineError("--size: " + std::to_string(o.size) + " " + o.unit_name +
@@ -362,6 +368,7 @@ int run(const Options& o) {
      << "  \"boundary_triangles\": " << boundary.F.rows() << ",\n"
      << "  \"element_size\": " << mesh_report.element_size << ",\n"
      << "  \"meshing_passes\": " << mesh_report.passes << ",\n"
+     << "  \"curvature_sizing\": " << (mesh_report.curvature_sizing ? "true" : "false") << ",\n"
      << "  \"quality\": {\"min_dihedral_deg\": " << quality.min_dihedral_deg
      << ", \"max_dihedral_deg\": " << quality.max_dihedral_deg
      << ", \"radius_ratio\": {\"min\": " << quality.min_radius_ratio << ", \"mean\": " << quality.mean_radius_ratio
