@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Fuzzes the mesh, vessel-tree and scene loaders with libFuzzer (clang, AddressSanitizer +
-# UBSan): any crash, sanitizer report or exception other than MeshError/VesselError/SceneError
+# Fuzzes the mesh, vessel-tree, scene and surface loaders with libFuzzer (clang, AddressSanitizer
+# + UBSan): any crash, sanitizer report or exception other than MeshError/VesselError/SceneError
 # fails the run.
 #   scripts/fuzz.sh [SECONDS_PER_TARGET]   (default 300) the corpus grows in build/fuzz/corpus_*
 #   scripts/fuzz.sh smoke                  20,000 inputs per target from the seeds, fixed random
@@ -24,10 +24,13 @@ build() {  # target sources... [libraries]
   fi
 }
 build fuzz_mesh "$REPO/test/fuzz/fuzz_mesh.cpp" "$REPO/src/core/mesh.cpp" "$REPO/src/core/mesh_io.cpp"
-build fuzz_vessel "$REPO/test/fuzz/fuzz_vessel.cpp" "$REPO/src/core/vessel_tree.cpp" -lyaml-cpp
+build fuzz_vessel "$REPO/test/fuzz/fuzz_vessel.cpp" "$REPO/src/core/vessel_tree.cpp" "$REPO/src/core/vtk_polydata.cpp" \
+  -lyaml-cpp
 build fuzz_scene "$REPO/test/fuzz/fuzz_scene.cpp" "$REPO/src/core/scene.cpp" "$REPO/src/core/options.cpp" \
   "$REPO/src/core/region.cpp" -lyaml-cpp
-for target in fuzz_mesh fuzz_vessel fuzz_scene; do
+build fuzz_surface "$REPO/test/fuzz/fuzz_surface.cpp" "$REPO/src/core/surface_io.cpp" "$REPO/src/core/vtk_polydata.cpp" \
+  "$REPO/src/core/surface_repair.cpp"
+for target in fuzz_mesh fuzz_vessel fuzz_scene fuzz_surface; do
   corpus="$OUT/corpus_${target#fuzz_}"
   [ "$DESCRIPTION" = smoke ] && corpus="$OUT/smoke_${target#fuzz_}" && rm -rf "$corpus"
   mkdir -p "$corpus"

@@ -3,37 +3,21 @@
 #include <yaml-cpp/yaml.h>
 
 #include <fstream>
+#include <limits>
 #include <numeric>
 #include <sstream>
 #include <vector>
 
-#include "text_tokens.h"
+#include "vtk_polydata.h"
 
 namespace liver_sim {
 namespace {
-
-using Tokens = TextTokens<VesselError>;
-constexpr long long kMaxNodes = 10000000;
 
 std::string extension(const std::string& path) {
   const size_t dot = path.rfind('.');
   std::string ext = dot == std::string::npos ? "" : path.substr(dot + 1);
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return ext;
-}
-
-void read_scalars(Tokens& in, long long n, Eigen::VectorXd& out) {
-  const std::string type = in.next("data type");
-  (void)type;
-  const std::string next = in.next("LOOKUP_TABLE or a value");
-  if (next != "LOOKUP_TABLE") {
-    // The optional component count ("1") came first.
-    if (next != "1") in.fail("only 1-component scalars are supported, got '" + next + "'");
-    in.expect("LOOKUP_TABLE");
-  }
-  in.next("lookup table name");
-  out.resize(n);
-  for (long long i = 0; i < n; ++i) out[i] = in.number("scalar value");
 }
 
 // Union-find root with path halving.
@@ -44,66 +28,47 @@ int root(std::vector<int>& parent, int i) {
 
 }  // namespace
 
-VesselTree read_vessel_vtk(std::istream& stream, const std::string& origin, double scale) {
-  Tokens in(origin, stream);
-  in.expect("#");
-  in.rest_of_line();  // "vtk DataFile Version x.y"
-  in.rest_of_line();  // title
-  const std::string encoding = in.next("ASCII");
-  if (encoding != "ASCII") in.fail("only ASCII legacy VTK is supported, got '" + encoding + "'");
-  in.expect("DATASET");
-  const std::string dataset = in.next("POLYDATA");
-  if (dataset != "POLYDATA") in.fail("expected DATASET POLYDATA, got '" + dataset + "'");
-  VesselTree t;
-  std::vector<Eigen::Vector2i> segments;
-  long long n = -1;
-  bool point_data = false;
-  while (!in.at_end()) {
-    const std::string key = in.next("a section");
-    if (key == "POINTS") {
-      if (n >= 0) in.fail("POINTS given twice");
-      n = in.count("point count", kMaxNodes);
-      in.next("data type");
-      t.points.resize(n, 3);
-      for (long long i = 0; i < n; ++i)
-        for (int c = 0; c < 3; ++c) t.points(i, c) = scale * in.number("coordinate");
-    } else if (key == "LINES") {
-      const long long lines = in.count("line count", kMaxNodes);
-      in.count("line list size", 2 * kMaxNodes);
-      for (long long l = 0; l < lines; ++l) {
-        const long long k = in.count("polyline size", kMaxNodes);
-        if (k < 2) in.fail("polyline " + std::to_string(l) + " has fewer than 2 points");
-        long long prev = in.integer("point index");
-        for (long long j = 1; j < k; ++j) {
-          const long long cur = in.integer("point index");
-          if (prev < 0 || cur < 0 || prev >= n || cur >= n)
-            in.fail("polyline " + std::to_string(l) + " refers to a point out of range");
-          segments.emplace_back(static_cast<int>(prev), static_cast<int>(cur));
-          prev = cur;
-        }
-      }
-    } else if (key == "POINT_DATA") {
-      if (in.count("point data count", kMaxNodes) != n) in.fail("POINT_DATA count differs from POINTS count");
-      point_data = true;
-    } else if (key == "SCALARS" && point_data) {
-      const std::string name = in.next("array name");
-      if (name == "radius") {
-        read_scalars(in, n, t.radius);
-        t.radius *= scale;
-      } else if (name == "wall_thickness") {
-        read_scalars(in, n, t.wall_thickness);
-        t.wall_thickness *= scale;
-      } else {
-        Eigen::VectorXd ignored;
-        read_scalars(in, n, ignored);
-      }
-    } else {
-      in.fail("unexpected '" + key + "'");
-    }
+VesselTree read_vessel_vtk(std::istream& stream, const std::string& origin, double scale, double wall_ratio) {
+  std::ostringstream bytes;
+  bytes << stream.rdbuf();
+  VtkPolyData data;
+  try {
+    data = read_vtk_polydata(bytes.str(), origin);
+  } catch (const FormatError& e) {
+    throw VesselError(e.what());
   }
-  if (n < 0) throw VesselError(origin + ": no POINTS");
-  if (t.radius.size() != n) throw VesselError(origin + ": no point array 'radius'");
-  if (t.wall_thickness.size() != n) throw VesselError(origin + ": no point array 'wall_thickness'");
+  if (!data.has_points) throw VesselError(origin + ": no POINTS");
+  VesselTree t;
+  t.points = scale * data.points;
+  std::vector<Eigen::Vector2i> segments;
+  const VtkCells& lines = data.lines;
+  for (long long l = 0; l < lines.size(); ++l) {
+    if (lines.offsets[l + 1] - lines.offsets[l] < 2)
+      throw VesselError(origin + ": polyline " + std::to_string(l) + " has fewer than 2 points");
+    for (long long j = lines.offsets[l] + 1; j < lines.offsets[l + 1]; ++j)
+      segments.emplace_back(static_cast<int>(lines.connectivity[j - 1]), static_cast<int>(lines.connectivity[j]));
+  }
+  // A point array by the first of `names` the file has; empty when it has none.
+  auto point_array = [&](std::initializer_list<const char*> names) {
+    for (const char* name : names) {
+      const auto it = data.point_arrays.find(name);
+      if (it == data.point_arrays.end()) continue;
+      if (it->second.cols() != 1)
+        throw VesselError(origin + ": point array '" + name + "' must have 1 component, not " +
+                          std::to_string(it->second.cols()));
+      return Eigen::VectorXd(scale * it->second.col(0));
+    }
+    return Eigen::VectorXd();
+  };
+  const long long n = t.points.rows();
+  t.radius = point_array({"radius", "MaximumInscribedSphereRadius"});
+  if (t.radius.size() != n) throw VesselError(origin + ": no point array 'radius' (nor VMTK's 'MaximumInscribedSphereRadius')");
+  t.wall_thickness = point_array({"wall_thickness"});
+  if (t.wall_thickness.size() != n) {
+    if (!(wall_ratio > 0))
+      throw VesselError(origin + ": no point array 'wall_thickness' (for centrelines without one, give a wall-to-radius ratio)");
+    t.wall_thickness = wall_ratio * t.radius;
+  }
   t.segments.resize(static_cast<int>(segments.size()), 2);
   for (size_t s = 0; s < segments.size(); ++s) t.segments.row(s) = segments[s].transpose();
   validate_vessel_tree(t, origin);
@@ -164,11 +129,11 @@ VesselTree read_vessel_yaml(const std::string& text, const std::string& origin, 
   return t;
 }
 
-VesselTree read_vessel_tree(const std::string& path, double scale) {
+VesselTree read_vessel_tree(const std::string& path, double scale, double wall_ratio) {
   std::ifstream in(path);
   if (!in) throw VesselError(path + ": cannot open");
   const std::string ext = extension(path);
-  if (ext == "vtk") return read_vessel_vtk(in, path, scale);
+  if (ext == "vtk") return read_vessel_vtk(in, path, scale, wall_ratio);
   if (ext != "yaml" && ext != "yml") throw VesselError(path + ": unknown vessel format (expected .vtk, .yaml or .yml)");
   std::stringstream text;
   text << in.rdbuf();
@@ -206,6 +171,24 @@ void validate_vessel_tree(const VesselTree& t, const std::string& origin) {
   }
   for (int i = 0; i < n; ++i)
     if (!used[i]) fail("node " + std::to_string(i) + ": belongs to no segment");
+}
+
+void write_vessel_vtk(const std::string& path, const VesselTree& t, const std::string& title) {
+  std::ofstream out(path);
+  if (!out) throw VesselError(path + ": cannot open for writing");
+  out.precision(std::numeric_limits<double>::max_digits10);
+  const Eigen::Index n = t.points.rows();
+  out << "# vtk DataFile Version 3.0\n" << title << "\nASCII\nDATASET POLYDATA\nPOINTS " << n << " double\n";
+  for (Eigen::Index i = 0; i < n; ++i) out << t.points(i, 0) << ' ' << t.points(i, 1) << ' ' << t.points(i, 2) << "\n";
+  out << "LINES " << t.segments.rows() << ' ' << 3 * t.segments.rows() << "\n";
+  for (Eigen::Index s = 0; s < t.segments.rows(); ++s) out << "2 " << t.segments(s, 0) << ' ' << t.segments(s, 1) << "\n";
+  out << "POINT_DATA " << n << "\n";
+  for (const auto& [name, values] : {std::pair<const char*, const Eigen::VectorXd*>{"radius", &t.radius},
+                                     {"wall_thickness", &t.wall_thickness}}) {
+    out << "SCALARS " << name << " double 1\nLOOKUP_TABLE default\n";
+    for (Eigen::Index i = 0; i < n; ++i) out << (*values)[i] << "\n";
+  }
+  if (!out) throw VesselError(path + ": write failed");
 }
 
 }  // namespace liver_sim

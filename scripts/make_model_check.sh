@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# The make_model tool end to end, as a user runs it (ctest: make_model_cli). Usage:
+#   scripts/make_model_check.sh MAKE_MODEL SIMULATE OUT_DIR
+# Checks: --help exits 0 and names every option; bad command lines exit 2, bad inputs exit 1 with
+# one line naming the file and the defect; the phantom's surface given in RAS millimetres makes the
+# same mesh byte for byte as in LPS; two runs write identical files; the scene converges in the
+# simulator under gravity with the phantom's portal tree embedded.
+set -euo pipefail
+MAKE_MODEL=$1 SIMULATE=$2 OUT=$3
+REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+rm -rf "$OUT" && mkdir -p "$OUT"
+fail() { echo "make_model_check: FAILED: $*" >&2; exit 1; }
+
+# Exit status and stderr of one run: "STATUS" then the messages in $OUT/err.
+run() { set +e; "$MAKE_MODEL" "$@" >"$OUT/out.json" 2>"$OUT/err"; local s=$?; set -e; echo "$s"; }
+
+help=$("$MAKE_MODEL" --help) || fail "--help exit status $?"
+for option in --surface --out --name --unit --input-frame --elements --size --feature-angle --max-deviation \
+              --merge-distance --largest-shell --fixed --fixed-sphere --posture --vessels --wall-ratio \
+              --snap-tolerance --boundary-out --quiet; do
+  grep -q -- "$option" <<<"$help" || fail "--help does not explain $option"
+done
+[ "$(run)" = 2 ] || fail "no arguments: expected exit 2"
+[ "$(run --surface a.stl --out "$OUT/x" --unit inch)" = 2 ] || fail "--unit inch: expected exit 2"
+[ "$(run --surface a.stl --out "$OUT/x" --elements 10)" = 2 ] || fail "--elements 10: expected exit 2"
+
+[ "$(run --surface "$OUT/missing.stl" --out "$OUT/x" --quiet)" = 1 ] || fail "missing file: expected exit 1"
+[ "$(wc -l <"$OUT/err")" = 1 ] && grep -q "missing.stl: cannot open" "$OUT/err" || fail "missing file: $(cat "$OUT/err")"
+printf 'solid one\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 100 0 0\nvertex 0 100 0\nendloop\nendfacet\nendsolid\n' \
+  >"$OUT/open.stl"
+[ "$(run --surface "$OUT/open.stl" --out "$OUT/x" --quiet)" = 1 ] || fail "open surface: expected exit 1"
+[ "$(wc -l <"$OUT/err")" = 1 ] && grep -q "open.stl: open boundary" "$OUT/err" || fail "open surface: $(cat "$OUT/err")"
+
+# The phantom's boundary in millimetres, LPS and RAS (x and y negated, exactly).
+/usr/bin/python3 "$REPO/scripts/liver_surface.py" "$REPO/config/phantom/liver_phantom.msh" "$OUT/lps.stl" >/dev/null
+/usr/bin/python3 "$REPO/scripts/liver_surface.py" "$REPO/config/phantom/liver_phantom.msh" "$OUT/ras.stl" --frame RAS \
+  >/dev/null
+[ "$(run --surface "$OUT/lps.stl" --unit m --out "$OUT/x" --quiet)" = 1 ] || fail "wrong unit: expected exit 1"
+grep -q "check --unit\|the unit is wrong" "$OUT/err" || fail "wrong unit: $(cat "$OUT/err")"
+
+common=(--elements 3000 --quiet)
+[ "$(run --surface "$OUT/lps.stl" --out "$OUT/lps" "${common[@]}")" = 0 ] || fail "LPS run: $(cat "$OUT/err")"
+[ "$(run --surface "$OUT/ras.stl" --input-frame RAS --out "$OUT/ras" "${common[@]}")" = 0 ] || fail "RAS run: $(cat "$OUT/err")"
+cmp -s "$OUT/lps/liver.msh" "$OUT/ras/liver.msh" || fail "the RAS surface did not give the LPS mesh"
+
+# Portal tree: the phantom's own file (metres, LPS) given in millimetres like the surface.
+awk 'BEGIN{p=0} /^POINTS/{p=$2; print; next} p>0{printf "%.9g %.9g %.9g\n", 1000*$1, 1000*$2, 1000*$3; p--; next}
+     /^SCALARS/{s=1; print; next} /^LOOKUP_TABLE/{print; next} s==1 && NF==1{printf "%.9g\n", 1000*$1; next} {print}' \
+  "$REPO/config/phantom/portal.vtk" >"$OUT/portal_mm.vtk"
+with_vessels=(--surface "$OUT/lps.stl" --vessels "portal=$OUT/portal_mm.vtk" --snap-tolerance 3 --boundary-out "$OUT/b.vtk"
+              "${common[@]}")
+[ "$(run "${with_vessels[@]}" --out "$OUT/a")" = 0 ] || fail "run a: $(cat "$OUT/err")"
+[ "$(run "${with_vessels[@]}" --out "$OUT/b")" = 0 ] || fail "run b: $(cat "$OUT/err")"
+for f in liver.msh liver.yaml liver_portal.vtk; do
+  cmp -s "$OUT/a/$f" "$OUT/b/$f" || fail "two runs wrote different $f"
+done
+
+"$SIMULATE" --scene "$OUT/a/liver.yaml" --quiet >"$OUT/simulate.json" || fail "simulate exit status $?"
+grep -q '"converged": true' "$OUT/simulate.json" || fail "the scene did not converge: $(cat "$OUT/simulate.json")"
+echo "make_model_check: passed ($(grep -o '"tetrahedra": [0-9]*' "$OUT/simulate.json"), portal tree embedded, converged)"
