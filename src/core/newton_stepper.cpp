@@ -441,8 +441,20 @@ void NewtonStepper::newton(StepResult& result) {
     }
     x_.swap(x_try_);
     r_.swap(r_try_);
-    // Modified Newton keeps its factor while it contracts the residual well.
-    if (strategy == Strategy::ModifiedNewton && best_norm > 0.9 * norm) factor_valid_ = false;
+    // Modified Newton keeps its factor while it contracts the residual well: with contacts, the
+    // residual it was asked to zero, which carries the update's change of the contact forces
+    // (a step that closes new gaps raises the residual it started from).
+    if (strategy == Strategy::ModifiedNewton) {
+      double asked = norm;
+      if (contact_update) {
+        f_tmp_ = r_;
+        contact_.add_force_change(f_tmp_);
+        for (int i = 0; i < f_tmp_.size(); ++i)
+          if (fixed[i]) f_tmp_[i] = 0;
+        asked = f_tmp_.norm();
+      }
+      if (best_norm > 0.9 * asked) factor_valid_ = false;
+    }
     norm = best_norm;
     reference = ref_try;
     if (contact_.detect(x_)) norm = residual(x_, r_, &reference);
