@@ -24,7 +24,7 @@ from sensor_msgs import point_cloud2
 from std_msgs.msg import Header
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-RADIUS = 0.008    # m, probe tip radius (launch/liver_sim.launch's instrument_radius)
+RADIUS = 0.0025   # m, probe tip radius (launch/liver_sim.launch's instrument_radius)
 SURFACE_Z = 0.039  # m, height of the sagged surface under the probe (static equilibrium)
 
 

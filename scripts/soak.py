@@ -36,7 +36,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker
 
 SURFACE_Z = 0.039   # m, sagged surface of the phantom's right lobe under the probe
-RADIUS = 0.008      # m, launch file's probe radius
+RADIUS = 0.0025     # m, launch file's probe radius
 
 
 def node_pid():

@@ -62,7 +62,7 @@ TEST(PhantomNode, PublishesTheEquilibriumOfTheCoreModelWithVessels) {
   pose.header.frame_id = "liver";
   pose.pose.position.x = 0.05;
   pose.pose.position.y = -0.02;
-  pose.pose.position.z = 0.039 + 0.008 - 0.005;  // the launch's 8 mm probe radius
+  pose.pose.position.z = 0.039 + 0.0025 - 0.005;  // the launch's 2.5 mm probe radius
   pose.pose.orientation.w = 1;
   ASSERT_TRUE(wait_for([&] { return pose_pub.getNumSubscribers() > 0; }, 10.0));
   const ros::Time sent = ros::Time::now();

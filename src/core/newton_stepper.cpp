@@ -12,6 +12,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 constexpr int kMaxKrylov = 30;      // GMRES iterations per Newton step
 constexpr int kRefactorAfter = 10;  // GMRES iterations beyond which the factor is refreshed
+constexpr int kStallIterations = 5; // a capped step this long that ends no lower than it began has stalled
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
@@ -271,8 +272,11 @@ void NewtonStepper::newton(StepResult& result) {
     }
     if (result.iterations - iterations_before == solver_.max_iterations) {
       // Capped but closer to equilibrium: kept, the next step continues (real-time frames).
-      // No closer after all the iterations: stalled, rolled back like a divergence.
-      if (current_merit >= start_merit) {
+      // No closer after all the iterations: stalled, rolled back like a divergence. A step
+      // capped below kStallIterations is a real-time frame absorbing a new input, whose merit
+      // may rise while the next frames continue from it; a runaway is still caught by the
+      // blow-up, energy and finiteness checks.
+      if (current_merit >= start_merit && solver_.max_iterations >= kStallIterations) {
         std::ostringstream m;
         m << "stalled: residual " << current_merit << " N after " << solver_.max_iterations
           << " iterations, no lower than the " << start_merit << " N it started from";

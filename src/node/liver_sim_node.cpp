@@ -77,8 +77,11 @@ class LiverSimNode {
     if (!(rate_ > 0) || !(publish_rate_ > 0) || !(probe_radius_ > 0) || !(color_scale_max_ > 0))
       throw std::invalid_argument("~rate, ~publish_rate, ~instrument_radius and ~color_scale_max must be > 0");
     if (!(surface_alpha_ >= 0 && surface_alpha_ <= 1)) throw std::invalid_argument("~surface_alpha must be in [0, 1]");
-    // ~parenchyma/*, ~capsule/*, ~solver/* override the scalars of the scene file.
-    std::vector<std::string> overrides;
+    // ~parenchyma/*, ~capsule/*, ~solver/* override the scalars of the scene file. The node
+    // steps in real-time frames by default: modified Newton on a reused factor (contacts carried
+    // in the same solve), two iterations a frame, a step that has not converged continuing in the
+    // next frame; ~solver/strategy and ~solver/max_iterations change that.
+    std::vector<std::string> overrides = {"solver.strategy=modified_newton", "solver.max_iterations=2"};
     for (const char* section : {"parenchyma", "capsule", "solver"}) {
       XmlRpc::XmlRpcValue values;
       if (!pnh.getParam(section, values)) continue;
