@@ -71,11 +71,13 @@ class LiverSimNode {
     pnh.param("rate", rate_, 30.0);
     pnh.param("publish_rate", publish_rate_, 15.0);
     pnh.param("instrument_radius", probe_radius_, 0.003);
+    pnh.param("instrument_length", probe_length_, 0.1);
     pnh.param("color_scale_max", color_scale_max_, 0.005);
     pnh.param("surface_alpha", surface_alpha_, 1.0);
     pnh.param("instrument_frames", instrument_frames_, std::vector<std::string>{});
-    if (!(rate_ > 0) || !(publish_rate_ > 0) || !(probe_radius_ > 0) || !(color_scale_max_ > 0))
-      throw std::invalid_argument("~rate, ~publish_rate, ~instrument_radius and ~color_scale_max must be > 0");
+    if (!(rate_ > 0) || !(publish_rate_ > 0) || !(probe_radius_ > 0) || !(probe_length_ > 0) || !(color_scale_max_ > 0))
+      throw std::invalid_argument(
+          "~rate, ~publish_rate, ~instrument_radius, ~instrument_length and ~color_scale_max must be > 0");
     if (!(surface_alpha_ >= 0 && surface_alpha_ <= 1)) throw std::invalid_argument("~surface_alpha must be in [0, 1]");
     // ~parenchyma/*, ~capsule/*, ~solver/* override the scalars of the scene file. The node
     // steps in real-time frames by default: modified Newton on a reused factor (contacts carried
@@ -106,10 +108,13 @@ class LiverSimNode {
     cloud_box_.max().array() += scene.registration.max_distance + cloud_margin_;
     // The instrument driven by instrument_pose / instrument_frames: out of the scene until its
     // first pose.
+    // A rod with a hemispherical tip: the pose is the tip's centre, its +z runs back along the rod
+    // (a sphere alone pressed deeper than its radius would let the tissue close over it).
     InstrumentOptions probe;
     probe.name = "ros_probe";
-    probe.type = InstrumentOptions::Type::Probe;
+    probe.type = InstrumentOptions::Type::Shaft;
     probe.radius = probe_radius_;
+    probe.length = probe_length_;
     probe.enabled = false;
     probe_index_ = model_->add_instrument(probe);
     ROS_INFO("liver_sim: %s: %ld nodes, %ld tetrahedra, %d capsule triangles, %d vessel beams, %s mode",
@@ -198,7 +203,7 @@ class LiverSimNode {
       registration_rms_ = 0;
       correspondences_ = 0;
       set_probe(std::nullopt);
-      probe_centre_.reset();
+      probe_pose_.reset();
       pose_changed_ = false;
       reset_requested_ = false;
       steps_ = 0;
@@ -214,12 +219,12 @@ class LiverSimNode {
     for (const std::string& frame : instrument_frames_) lookup_instrument_frame(frame);
     if (probe_removed_) {
       set_probe(std::nullopt);
-      probe_centre_.reset();
+      probe_pose_.reset();
       probe_removed_ = false;
       changed = true;
     }
-    if (pose_changed_ && probe_centre_) {
-      set_probe(probe_centre_);
+    if (pose_changed_ && probe_pose_) {
+      set_probe(probe_pose_);
       reflected_stamp_ = pose_stamp_;
       pose_changed_ = false;
       changed = true;
@@ -227,23 +232,26 @@ class LiverSimNode {
     return changed;
   }
 
-  // The ROS-driven probe at a tip centre, or out of the scene. (mutex held)
-  void set_probe(const std::optional<Eigen::Vector3d>& centre) {
+  // The ROS-driven probe at a tip pose, or out of the scene. (mutex held)
+  void set_probe(const std::optional<Eigen::Isometry3d>& pose) {
     InstrumentOptions o = model_->instrument(probe_index_);
-    o.enabled = centre.has_value();
-    if (centre) o.position = *centre;
+    o.enabled = pose.has_value();
+    if (pose) {
+      o.position = pose->translation();
+      o.orientation = Eigen::Quaterniond(pose->linear());
+    }
     o.radius = probe_radius_;
     model_->update_instrument(probe_index_, o);  // inputs are validated on arrival
   }
 
-  // Instruments tracked through tf: the frame origin is the probe tip centre. (mutex held)
+  // Instruments tracked through tf: the frame is the probe's tip pose. (mutex held)
   void lookup_instrument_frame(const std::string& frame) {
     try {
       const geometry_msgs::TransformStamped t = tf_buffer_.lookupTransform(frame_id_, frame, ros::Time(0));
-      const Eigen::Vector3d c(t.transform.translation.x, t.transform.translation.y, t.transform.translation.z);
-      if (!c.allFinite()) return reject("non-finite transform of " + frame);
-      if (!probe_centre_ || (*probe_centre_ - c).norm() > 1e-9) {
-        probe_centre_ = c;
+      const Eigen::Isometry3d c = to_eigen(t.transform);
+      if (!c.matrix().allFinite()) return reject("non-finite transform of " + frame);
+      if (!probe_pose_ || !probe_pose_->isApprox(c, 1e-9)) {
+        probe_pose_ = c;
         pose_stamp_ = t.header.stamp;
         pose_changed_ = true;
       }
@@ -269,7 +277,12 @@ class LiverSimNode {
         return reject("instrument_pose in frame '" + msg->header.frame_id + "': " + e.what());
       }
     }
-    probe_centre_ = Eigen::Vector3d(p.pose.position.x, p.pose.position.y, p.pose.position.z);
+    // An orientation left at zeros (unset) is the identity: the rod points up the frame's z.
+    const auto& o = p.pose.orientation;
+    Eigen::Quaterniond q(o.w, o.x, o.y, o.z);
+    if (q.coeffs().isZero(0.0)) q.setIdentity();
+    if (!(std::abs(q.norm() - 1) < 1e-3)) return reject("instrument_pose orientation is not a unit quaternion");
+    probe_pose_ = make_pose(Eigen::Vector3d(p.pose.position.x, p.pose.position.y, p.pose.position.z), q);
     pose_stamp_ = msg->header.stamp;
     pose_changed_ = true;
   }
@@ -285,7 +298,7 @@ class LiverSimNode {
     if (!std::isfinite(msg->radius) || msg->radius < 0) return reject("instrument radius must be finite and >= 0");
     if (msg->radius > 0) {
       probe_radius_ = msg->radius;
-      pose_changed_ = probe_centre_.has_value();
+      pose_changed_ = probe_pose_.has_value();
     }
   }
 
@@ -465,20 +478,28 @@ class LiverSimNode {
       vessel_pub_.publish(vessel_marker_);
     }
 
-    // The probe tip as a translucent sphere (deleted when there is no probe).
+    // The probe's rod as a translucent cylinder from its tip along its +z (deleted when there is
+    // no probe).
     visualization_msgs::Marker tip;
     tip.header = marker_.header;
     tip.ns = "instruments";
-    tip.type = visualization_msgs::Marker::SPHERE;
+    tip.type = visualization_msgs::Marker::CYLINDER;
     std::lock_guard<std::mutex> lock(mutex_);
-    tip.action = probe_centre_ ? visualization_msgs::Marker::ADD : visualization_msgs::Marker::DELETE;
-    if (probe_centre_) {
-      tip.pose.position.x = probe_centre_->x();
-      tip.pose.position.y = probe_centre_->y();
-      tip.pose.position.z = probe_centre_->z();
-    }
+    tip.action = probe_pose_ ? visualization_msgs::Marker::ADD : visualization_msgs::Marker::DELETE;
     tip.pose.orientation.w = 1;
-    tip.scale.x = tip.scale.y = tip.scale.z = 2 * probe_radius_;
+    if (probe_pose_) {
+      const Eigen::Vector3d centre = *probe_pose_ * Eigen::Vector3d(0, 0, 0.5 * probe_length_);
+      const Eigen::Quaterniond q(probe_pose_->linear());
+      tip.pose.position.x = centre.x();
+      tip.pose.position.y = centre.y();
+      tip.pose.position.z = centre.z();
+      tip.pose.orientation.x = q.x();
+      tip.pose.orientation.y = q.y();
+      tip.pose.orientation.z = q.z();
+      tip.pose.orientation.w = q.w();
+    }
+    tip.scale.x = tip.scale.y = 2 * probe_radius_;
+    tip.scale.z = probe_length_;
     tip.color.r = tip.color.g = tip.color.b = 0.8f;
     tip.color.a = 0.6f;
     instrument_pub_.publish(tip);
@@ -543,7 +564,7 @@ class LiverSimNode {
   std::unique_ptr<LiverModel> model_;
   int probe_index_ = -1;
   std::string frame_id_;
-  double rate_, publish_rate_, probe_radius_, color_scale_max_, surface_alpha_;
+  double rate_, publish_rate_, probe_radius_, probe_length_, color_scale_max_, surface_alpha_;
   std::vector<std::string> instrument_frames_;
   ros::Publisher mesh_pub_, instrument_pub_, vessel_pub_, status_pub_, wrench_pub_, target_marker_pub_, target_pose_pub_;
   std::unique_ptr<SurfaceRegistration> registration_;
@@ -566,7 +587,7 @@ class LiverSimNode {
 
   // Shared with callbacks, under mutex_.
   std::mutex mutex_;
-  std::optional<Eigen::Vector3d> probe_centre_;
+  std::optional<Eigen::Isometry3d> probe_pose_;
   ros::Time pose_stamp_;
   bool pose_changed_ = false, probe_removed_ = false, reset_requested_ = false, align_requested_ = false;
   std::optional<CapsuleOptions> pending_capsule_;

@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Starts a ROS master and the node as launched (launch/liver_sim.launch, the liver phantom,
+# publish_rate 30), the node pinned to one core, and measures it under a probe driven at 30 Hz
+# with scripts/measure_contact_node.py. Build first (scripts/run.sh).
+#   scripts/measure_contact_node.sh [SECONDS]   (default 20)
+source "$(dirname "$0")/ros_env.sh" 11497
+roscore -p 11497 >/dev/null 2>&1 & MASTER=$!
+sleep 3
+taskset -c 0 roslaunch liver_sim liver_sim.launch publish_rate:=30 >/dev/null 2>&1 & LAUNCH=$!
+trap 'kill $LAUNCH 2>/dev/null; wait $LAUNCH 2>/dev/null; kill $MASTER 2>/dev/null' EXIT
+"$REPO/scripts/measure_contact_node.py" "${1:-20}"
