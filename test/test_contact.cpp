@@ -265,6 +265,63 @@ TEST(Tube, AspirationBalancesAndTheCapsuleHalvesTheLift) {
   EXPECT_LE(lift[0] / lift[1], 2.5);
 }
 
+// A 5 mm rod (2.5 mm radius, hemispherical tip) pressed 4 mm into the sagged right lobe of the
+// liver phantom, whose surface triangles are ~8.5 mm across, at points between nodes: the tip
+// pushes the surface in, the tissue pushes the rod back, and no part of the deformed surface
+// lies inside the rod deeper than 10% of the press. The surface is checked on a grid of 30 x 30
+// points per triangle, finer than the contact's own samples (half the radius apart). Checked to
+// fail with the contacts at the nodes only (sample spacing infinite): at two of the three spots
+// the rod then touches no node, feels no force, and the surface passes 2.5 mm into it.
+TEST(SurfaceContact, ThinRodPressedBetweenNodesKeepsTheSurfaceOut) {
+  Scene s = load_scene(std::string(LIVER_SIM_SOURCE_DIR) + "/config/scenes/liver_phantom.yaml");
+  LiverModel equilibrium(load_scene_mesh(s), s);
+  ASSERT_TRUE(equilibrium.step().converged());
+  const Eigen::VectorXd sagged = equilibrium.positions();
+  const double r = 0.0025, press = 0.004;
+  const Eigen::MatrixX3i& boundary = equilibrium.boundary();
+  auto corner = [&](int t, int k) { return Eigen::Vector3d(sagged.segment<3>(3 * boundary(t, k))); };
+  // Spots: the centroids of the upward-facing triangles nearest to three points of the right lobe.
+  for (const Eigen::Vector2d& spot : {Eigen::Vector2d(0.046, -0.016), Eigen::Vector2d(0.07, 0.01), Eigen::Vector2d(0.03, -0.04)}) {
+    int best = -1;
+    double best_distance = 1e9;
+    for (int t = 0; t < boundary.rows(); ++t) {
+      const Eigen::Vector3d n = (corner(t, 1) - corner(t, 0)).cross(corner(t, 2) - corner(t, 0)).normalized();
+      const Eigen::Vector3d c = (corner(t, 0) + corner(t, 1) + corner(t, 2)) / 3;
+      const double d = (c.head<2>() - spot).norm();
+      if (n.z() > 0.8 && d < best_distance) best_distance = d, best = t;
+    }
+    ASSERT_GE(best, 0);
+    const Eigen::Vector3d surface = (corner(best, 0) + corner(best, 1) + corner(best, 2)) / 3;
+    // The node's path: modified Newton on a reused factor, the contact forces in the same solve.
+    Scene pressed = s;
+    pressed.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
+    pressed.solver.max_iterations = 300;
+    pressed.solver.tolerance = 1e-6;  // the geometry checked below is settled long before 1e-8
+    LiverModel m(load_scene_mesh(pressed), pressed);
+    m.set_positions(sagged);
+    InstrumentOptions rod;
+    rod.name = "rod";
+    rod.type = InstrumentOptions::Type::Shaft;
+    rod.radius = r;
+    rod.length = 0.1;
+    rod.position = surface + Eigen::Vector3d(0, 0, r - press);
+    m.add_instrument(rod);
+    const StepResult res = m.step();
+    ASSERT_TRUE(res.converged()) << res.message;
+    EXPECT_GT(m.instrument_reaction(0).force.z(), 0.0) << "the tissue pushes the rod back";
+    double deepest = 0;
+    for (int t = 0; t < boundary.rows(); ++t)
+      for (int i = 0; i <= 30; ++i)
+        for (int j = 0; i + j <= 30; ++j) {
+          const Eigen::Vector3d w(30 - i - j, i, j);
+          Eigen::Vector3d p = Eigen::Vector3d::Zero();
+          for (int k = 0; k < 3; ++k) p += w[k] / 30 * m.positions().segment<3>(3 * boundary(t, k));
+          deepest = std::min(deepest, surface_distance(rod, m.contact().pose(0), p).distance);
+        }
+    EXPECT_GE(deepest, -0.1 * press) << "the surface passes into the rod at (" << spot.transpose() << ")";
+  }
+}
+
 // Hertz: a rigid sphere (R = 10 mm) pressed delta = 0.2 mm (contact radius a = 1.41 mm) into a
 // large block (120 x 120 x 60 mm, nu = 0.3, frictionless), the meshes graded towards the contact
 // (sinh mapping; centre spacing 0.75, 0.5, 0.375 mm). F = 4/3 E* R^1/2 delta^3/2.

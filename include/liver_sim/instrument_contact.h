@@ -120,9 +120,11 @@ class InstrumentContact {
     double relative_residual = 0;  // GMRES's at the end
     int sweeps = 0;                // Gauss-Seidel sweeps
   };
-  Update direct_update(CholmodSolver& factor, const Eigen::VectorXd& r, Eigen::VectorXd& dx);
-  Update krylov_update(CholmodSolver& factor, const Gmres::Operator& jacobian, const Eigen::VectorXd& r,
-                       double forcing, Eigen::VectorXd& dx);
+  // The contact problem is solved until its gaps carry a force error below force_tolerance (N),
+  // and to 1% of options().tolerance at least.
+  Update direct_update(CholmodSolver& factor, const Eigen::VectorXd& r, double force_tolerance, Eigen::VectorXd& dx);
+  Update krylov_update(CholmodSolver& factor, const Gmres::Operator& jacobian, const Eigen::VectorXd& r, double forcing,
+                       double force_tolerance, Eigen::VectorXd& dx);
   // The forces of the last update scaled along the step, l_before + alpha (l_update - l_before):
   // a line search's trial point alpha dx carries alpha of the force change (0: the update undone).
   void scale_update(double alpha);
@@ -151,14 +153,17 @@ class InstrumentContact {
   Eigen::Vector3d contact_rows(const Contact& c, const Eigen::VectorXd& x, Eigen::Matrix3d* frame) const;
   // Instrument k's size: the length a stage may travel is a quarter of it.
   static double size(const InstrumentOptions& o);
-  // The triangles that may come within `reach` of instrument k at x, by a bound on their
-  // distance (the distance function grows no faster than the distance).
+  // The triangles that may come within `reach` of an instrument of shape o at pose at x, by a
+  // bound on their distance (the distance function grows no faster than the distance).
   template <typename Visit>
-  void near_triangles(int k, const Eigen::VectorXd& x, double reach, const Visit& visit) const;
+  void near_triangles(const InstrumentOptions& o, const Eigen::Isometry3d& pose, const Eigen::VectorXd& x, double reach,
+                      const Visit& visit) const;
   // The samples of boundary triangle t at most `spacing` apart in the rest shape (infinite: its
   // nodes), each a SurfacePoint given to visit().
   template <typename Visit>
   void sample_triangle(int t, double spacing, const Visit& visit) const;
+  // The gap tolerance of the contact problem for a force tolerance (N): see direct_update.
+  double gap_tolerance(double force_tolerance) const;
   // The Delassus operator of the contacts in W_, the predicted rows after the update A^-1 r in
   // delta_ and the current forces in lambda_ (contact frames); z_ = L^-1 P r.
   void contact_problem(CholmodSolver& factor, const Eigen::VectorXd& r);

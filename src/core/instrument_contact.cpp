@@ -12,6 +12,7 @@ namespace {
 
 constexpr int kMaxKrylov = 30;  // GMRES iterations per Newton update
 constexpr int kMaxStages = 16;  // instrument stages per step
+constexpr int kMaxRetreats = 32;  // steps back along the axis of an instrument that appears
 
 void require_valid(const std::string& message) {
   if (!message.empty()) throw std::invalid_argument(message);
@@ -99,15 +100,15 @@ double InstrumentContact::size(const InstrumentOptions& o) {
 }
 
 template <typename Visit>
-void InstrumentContact::near_triangles(int k, const Eigen::VectorXd& x, double reach, const Visit& visit) const {
-  const Instrument& in = instruments_[k];
+void InstrumentContact::near_triangles(const InstrumentOptions& o, const Eigen::Isometry3d& pose, const Eigen::VectorXd& x,
+                                       double reach, const Visit& visit) const {
   const Eigen::MatrixX3i& boundary = mechanics_.boundary();
   for (int t = 0; t < boundary.rows(); ++t) {
     const Eigen::Vector3d a = x.segment<3>(3 * boundary(t, 0)), b = x.segment<3>(3 * boundary(t, 1)),
                           c = x.segment<3>(3 * boundary(t, 2));
     const Eigen::Vector3d centre = (a + b + c) / 3;
     const double radius = std::sqrt(std::max({(a - centre).squaredNorm(), (b - centre).squaredNorm(), (c - centre).squaredNorm()}));
-    if (surface_distance(in.options, in.pose, centre).distance - radius >= reach) continue;
+    if (surface_distance(o, pose, centre).distance - radius >= reach) continue;
     visit(t, a, b, c);
   }
 }
@@ -165,13 +166,18 @@ int InstrumentContact::begin_step(double t, const Eigen::VectorXd& x) {
     in.pose = pose_at(o, t);
     if (o.enabled && o.type != InstrumentOptions::Type::Grasper) {
       if (!in.was_enabled) {
-        // It appears: it comes in along its axis from where it touches the surface nowhere.
-        double depth = 0;
-        near_triangles(k, x, 0.0, [&](int, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-          depth = std::max(depth, -deepest_point(o, in.pose, a, b, c).distance.distance);
-        });
+        // It appears: it comes in along its axis from where it touches the surface nowhere. Each
+        // retreat by the deepest penetration brings that closer (for a rod through the surface,
+        // by its radius at a time until its tip is out).
         in.pose_start = in.pose;
-        in.pose_start.translation() += depth * in.pose.linear().col(2);
+        for (int retreat = 0; retreat < kMaxRetreats; ++retreat) {
+          double depth = 0;
+          near_triangles(o, in.pose_start, x, 0.0, [&](int, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+            depth = std::max(depth, -deepest_point(o, in.pose_start, a, b, c).distance.distance);
+          });
+          if (depth <= 0) break;
+          in.pose_start.translation() += depth * in.pose.linear().col(2);
+        }
       }
       const double travel = (in.pose.translation() - in.pose_start.translation()).norm();
       stages = std::max(stages, std::min(kMaxStages, static_cast<int>(std::ceil(travel / (0.25 * size(o))))));
@@ -268,7 +274,7 @@ bool InstrumentContact::detect(const Eigen::VectorXd& x) {
       // surface at its nodes.
       const double spacing = in.options.type == InstrumentOptions::Type::Tube ? std::numeric_limits<double>::infinity()
                                                                                : 0.5 * in.options.radius;
-      near_triangles(k, x, options_.alarm_distance,
+      near_triangles(in.options, in.pose, x, options_.alarm_distance,
                      [&](int t, const Eigen::Vector3d&, const Eigen::Vector3d&, const Eigen::Vector3d&) {
                        sample_triangle(t, spacing, [&](const SurfacePoint& s) {
                          // A point held at least half by the scene's supports is left to them:
@@ -402,12 +408,19 @@ void InstrumentContact::add_forward(const std::vector<Eigen::Vector3d>& change) 
   for (int node : free_nodes_) compliance_.add(node, node_vector_[node], z_);
 }
 
+double InstrumentContact::gap_tolerance(double force_tolerance) const {
+  // A gap left open by e carries a force error of about e / W_cc.
+  double compliance = std::numeric_limits<double>::infinity();
+  for (Eigen::Index c = 0; c < W_.rows(); c += 3) compliance = std::min(compliance, W_(c, c));
+  return std::min(0.01 * options_.tolerance, force_tolerance * compliance);
+}
+
 InstrumentContact::Update InstrumentContact::direct_update(CholmodSolver& factor, const Eigen::VectorXd& r,
-                                                           Eigen::VectorXd& dx) {
+                                                           double force_tolerance, Eigen::VectorXd& dx) {
   Update update;
   contact_problem(factor, r);
   const ContactSolveResult solved = solve_frictional_contacts(W_, delta_, bilateral_, options_.friction,
-                                                              0.01 * options_.tolerance, options_.max_iterations, lambda_);
+                                                              gap_tolerance(force_tolerance), options_.max_iterations, lambda_);
   ++solves_;
   update.sweeps = solved.sweeps;
   change_.resize(contacts_.size());
@@ -422,13 +435,14 @@ InstrumentContact::Update InstrumentContact::direct_update(CholmodSolver& factor
 }
 
 InstrumentContact::Update InstrumentContact::krylov_update(CholmodSolver& factor, const Gmres::Operator& jacobian,
-                                                           const Eigen::VectorXd& r, double forcing, Eigen::VectorXd& dx) {
+                                                           const Eigen::VectorXd& r, double forcing, double force_tolerance,
+                                                           Eigen::VectorXd& dx) {
   Update update;
   // 1. The frictional contact problem with the rows predicted after the tangent's update A^-1 r:
   // which contacts separate, stick or slide.
   contact_problem(factor, r);
   const ContactSolveResult solved = solve_frictional_contacts(W_, delta_, bilateral_, options_.friction,
-                                                              0.01 * options_.tolerance, options_.max_iterations, lambda_);
+                                                              gap_tolerance(force_tolerance), options_.max_iterations, lambda_);
   ++solves_;
   update.sweeps = solved.sweeps;
 

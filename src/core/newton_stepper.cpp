@@ -337,6 +337,8 @@ void NewtonStepper::newton(StepResult& result) {
     t0 = Clock::now();
     // A factorisation costs far more than a GMRES iteration: solve each linearisation well.
     const double forcing = std::clamp(0.1 * solver_.tolerance * reference / current_merit, 1e-6, 0.1);
+    // The contact problem's share of the force residual the step must reach.
+    const double force_tolerance = 0.1 * std::max(solver_.tolerance * reference, force_floor);
     // The operators capture `this` only: a std::function keeps that without an allocation.
     const Gmres::Operator jacobian = [this](const Eigen::VectorXd& v, Eigen::VectorXd& out) {
       const double h = 1e-8 * mechanics_.length_scale() / std::max(v.cwiseAbs().maxCoeff(), 1e-300);
@@ -355,7 +357,7 @@ void NewtonStepper::newton(StepResult& result) {
     int krylov = 0;
     if (direct && contact_.active()) {
       const auto t_contact = Clock::now();
-      result.contact_sweeps += contact_.direct_update(cholmod_, r_, dx_).sweeps;
+      result.contact_sweeps += contact_.direct_update(cholmod_, r_, force_tolerance, dx_).sweeps;
       result.timing.contact_ms += ms_since(t_contact);
     } else if (strategy == Strategy::FullNewton || strategy == Strategy::ModifiedNewton) {
       cholmod_.solve(r_, dx_);
@@ -374,7 +376,7 @@ void NewtonStepper::newton(StepResult& result) {
       if (krylov > kRefactorAfter || gmres_.relative_residual() > forcing) factor_valid_ = false;
     } else {
       const auto t_contact = Clock::now();
-      const InstrumentContact::Update update = contact_.krylov_update(cholmod_, jacobian, r_, forcing, dx_);
+      const InstrumentContact::Update update = contact_.krylov_update(cholmod_, jacobian, r_, forcing, force_tolerance, dx_);
       result.contact_sweeps += update.sweeps;
       krylov = update.krylov;
       result.timing.contact_ms += ms_since(t_contact);
