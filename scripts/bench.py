@@ -3,11 +3,17 @@
 
 Runs the `bench` tool (the scene's equilibrium, then breathing loads 1 + 0.5 sin(2 pi t)) on the
 aspiration cube at about 2k, 10k and 50k tetrahedra (frames of 1 ms) and on the liver phantom
-(11k tetrahedra, frames of 10 ms), writes doc/bench.csv and draws
-  doc/bench_pareto.png   error against time per frame (the Pareto front), per mesh
+(11k tetrahedra, frames of 10 ms and 33 ms); then with instruments in contact (config/bench/): a
+probe pressing and sweeping on the cube (1 ms frames) and on the phantom (10 ms and 33 ms), a
+grasper lifting the edge of the right lobe, and the aspiration tube. Errors are against converged
+dynamics (Newton to 1e-10) of the same run, contact included. Writes doc/bench.csv (a contact
+row carries `contact_free_ratio`: its mean frame over the contact-free frame of the same mesh and
+strategy) and draws
+  doc/bench_pareto.png   error against time per frame (the Pareto front), per case
   doc/bench_scaling.png  time per frame and one factorisation against DOFs (log-log, fitted exponents)
 Pin it: taskset -c 0 scripts/bench.py (one core), or taskset -c 0,1 (both, OpenMP).
-  --quick   the 2k cube only, 20 frames, three strategies (the test suite's smoke run)
+  --quick   the 2k cube only, without (20 frames) and with the probe (100 frames), a few strategies
+            (the test suite's smoke run)
 """
 import argparse
 import csv
@@ -20,6 +26,9 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BENCH = os.path.join(REPO, "build/ws/devel/lib/liver_sim/bench")
 CUBE = os.path.join(REPO, "config/scenes/aspiration_cube.yaml")
 PHANTOM = os.path.join(REPO, "config/scenes/liver_phantom.yaml")
+PROBE_CUBE = os.path.join(REPO, "config/scenes/probe_cube.yaml")
+TUBE = os.path.join(REPO, "config/scenes/aspiration_tube.yaml")
+INSTRUMENTS = os.path.join(REPO, "config/bench")
 
 ALL = ["newton_krylov:30:1e-6", "newton_krylov:1:0", "full_newton:30:1e-6", "full_newton_eigen:30:1e-6",
        "reused_factor_cg:30:1e-6", "cg:30:1e-6", "modified_newton:1:0", "modified_newton:2:0"]
@@ -27,18 +36,35 @@ LARGE = ["newton_krylov:30:1e-6", "newton_krylov:1:0", "full_newton:30:1e-6", "r
          "modified_newton:1:0", "modified_newton:2:0"]
 
 
+CONTACT = ["newton_krylov:30:1e-6", "full_newton:30:1e-6", "modified_newton:1:0", "modified_newton:2:0",
+           "modified_newton:3:0"]
+
+
 def cases(quick):
+    """(label, scene, --set overrides, frames, strategies, instruments file or None, contact-free case)"""
     if quick:
         return [("cube 2k", CUBE, ["mesh.box.divisions.0=8", "mesh.box.divisions.1=8", "mesh.box.divisions.2=8",
                                    "solver.dt=0.001"], 20, ["newton_krylov:30:1e-6", "full_newton_eigen:30:1e-6",
-                                                            "modified_newton:1:0"])]
+                                                            "modified_newton:1:0"], None, None),
+                ("cube 2k probe", PROBE_CUBE, [], 100, ["newton_krylov:30:1e-6", "modified_newton:1:0"],
+                 os.path.join(INSTRUMENTS, "probe_sweep_cube.yaml"), None)]
     out = []
     # Jacobi-preconditioned CG only on the small cube: with the capsule it needs thousands of
     # iterations per update on the larger meshes.
     for label, n, frames, strategies in [("cube 2k", 8, 200, ALL), ("cube 10k", 13, 100, LARGE + ["full_newton_eigen:30:1e-6"]),
                                          ("cube 50k", 22, 30, LARGE)]:
-        out.append((label, CUBE, [f"mesh.box.divisions.{i}={n}" for i in range(3)] + ["solver.dt=0.001"], frames, strategies))
-    out.append(("phantom 11k", PHANTOM, ["solver.dt=0.01"], 50, LARGE + ["full_newton_eigen:30:1e-6"]))
+        out.append((label, CUBE, [f"mesh.box.divisions.{i}={n}" for i in range(3)] + ["solver.dt=0.001"], frames,
+                    strategies, None, None))
+    out.append(("phantom 11k", PHANTOM, ["solver.dt=0.01"], 50, LARGE + ["full_newton_eigen:30:1e-6", "modified_newton:3:0"],
+                None, None))
+    out.append(("phantom 11k 33 ms", PHANTOM, ["solver.dt=0.033"], 30, CONTACT, None, None))
+    probe_phantom = os.path.join(INSTRUMENTS, "probe_sweep_phantom.yaml")
+    out += [("cube 2k probe", PROBE_CUBE, [], 300, CONTACT, os.path.join(INSTRUMENTS, "probe_sweep_cube.yaml"), "cube 2k"),
+            ("phantom probe", PHANTOM, ["solver.dt=0.01"], 90, CONTACT, probe_phantom, "phantom 11k"),
+            ("phantom probe 33 ms", PHANTOM, ["solver.dt=0.033"], 28, CONTACT, probe_phantom, "phantom 11k 33 ms"),
+            ("phantom grasper lift", PHANTOM, ["solver.dt=0.01"], 60, CONTACT,
+             os.path.join(INSTRUMENTS, "grasper_lift_phantom.yaml"), "phantom 11k"),
+            ("aspiration tube", TUBE, [], 60, CONTACT, None, None)]
     return out
 
 
@@ -51,8 +77,10 @@ def main():
     if not os.path.exists(args.bench):
         sys.exit(f"{args.bench} not found: build first (scripts/run.sh)")
     rows = []
-    for label, scene, sets, frames, strategies in cases(args.quick):
+    for label, scene, sets, frames, strategies, instruments, free in cases(args.quick):
         cmd = [args.bench, "--scene", scene, "--frames", str(frames)]
+        if instruments:
+            cmd += ["--instruments", instruments]
         for s in sets:
             cmd += ["--set", s]
         for s in strategies:
@@ -62,17 +90,28 @@ def main():
         for row in csv.DictReader(io.StringIO(out)):
             row["case"] = label
             row["scene"] = os.path.relpath(row["scene"], REPO)  # the CSV is committed: no machine path
+            row["instruments"] = os.path.relpath(instruments, REPO) if instruments else ""
+            row["contact_free_ratio"] = ""
+            if free:
+                same = [r for r in rows if r["case"] == free and r["strategy"] == row["strategy"]
+                        and r["iterations"] == row["iterations"]]
+                if same:
+                    row["contact_free_ratio"] = f"{float(row['mean_ms']) / float(same[0]['mean_ms']):.3f}"
             rows.append(row)
+            ratio = f"  x{row['contact_free_ratio']} of contact-free" if row["contact_free_ratio"] else ""
             print(f"  {row['strategy']}:{row['iterations']}  mean {float(row['mean_ms']):.2f} ms  "
-                  f"error {float(row['max_error']):.2e}", file=sys.stderr, flush=True)
+                  f"error {float(row['max_error']):.2e}  contacts {float(row['contacts']):.1f}{ratio}",
+                  file=sys.stderr, flush=True)
     for row in rows:
         if int(row["diverged"]) > 0 or not float(row["max_error"]) < 1:
             print(f"bench: {row['case']} {row['strategy']}:{row['iterations']}: {row['diverged']} frames rolled back, "
                   f"error {row['max_error']}", file=sys.stderr)
     if args.quick:  # the smoke run checks that the driver works, not how fast
         exact = [r for r in rows if r["strategy"] == "newton_krylov"]
-        if not exact or float(exact[0]["max_error"]) > 1e-4:
-            sys.exit("bench: the tolerance-driven run does not match the reference")
+        if len(exact) != 2 or any(float(r["max_error"]) > 1e-4 for r in exact):
+            sys.exit("bench: a tolerance-driven run does not match its reference")
+        if not float(exact[1]["contacts"]) > 0:
+            sys.exit("bench: the probe never touched the cube")
         print(f"bench: smoke ok ({len(rows)} strategies)")
         return
     os.makedirs(args.out, exist_ok=True)
@@ -90,8 +129,12 @@ def plot(rows, out):
     import matplotlib.pyplot as plt
     import numpy as np
 
-    fig, axes = plt.subplots(1, len({r["case"] for r in rows}), figsize=(16, 4.2), sharey=True)
-    for ax, case in zip(axes, dict.fromkeys(r["case"] for r in rows)):
+    case_names = list(dict.fromkeys(r["case"] for r in rows))
+    columns = (len(case_names) + 1) // 2
+    fig, axes = plt.subplots(2, columns, figsize=(3.6 * columns, 8), sharey=True, squeeze=False)
+    for ax in axes.flat[len(case_names):]:
+        ax.set_visible(False)
+    for ax, case in zip(axes.flat, case_names):
         for r in (r for r in rows if r["case"] == case):
             label = f"{r['strategy']}:{r['iterations']}"
             ax.scatter(float(r["mean_ms"]), max(float(r["max_error"]), 1e-9), s=30)
@@ -99,8 +142,9 @@ def plot(rows, out):
         ax.axhline(0.01, color="0.6", ls="--", lw=0.8)
         ax.set(xscale="log", yscale="log", xlabel="mean time per frame (ms)", title=case)
         ax.grid(alpha=0.3)
-    axes[0].set_ylabel("max displacement error / peak motion")
-    fig.suptitle("Error against time per frame (1% line dashed)")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("max displacement error / peak motion")
+    fig.suptitle("Error against time per frame (1% line dashed; lower row: instruments in contact)")
     fig.tight_layout()
     fig.savefig(os.path.join(out, "bench_pareto.png"), dpi=90)
 

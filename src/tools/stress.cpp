@@ -1,8 +1,10 @@
 // Numerical stress matrix: the aspiration cube pushed to extreme parameters, time steps, loads
-// and meshes. Each case has an expected outcome: converged (static: within 10 steps; dynamic:
+// and meshes, and instruments in extreme contact on the probe cube. Each case has an expected outcome: converged (static: within 10 steps; dynamic:
 // every step), or detected as diverging for a stated reason and rolled back to the exact state
 // before the step, with nothing non-finite left in the model.
-//   stress [--quick] [--scene FILE] [--csv FILE]
+//   stress [--quick] [--group NAME] [--set K=V]... [--scene FILE] [--csv FILE]
+// (--group: the cases of one group, e.g. contact; --set: a scene override applied to every case
+// after its own, e.g. solver.strategy=full_newton; --scene: the default scene's replacement)
 // Prints a Markdown table on standard output, progress on standard error. Exit status 0 when
 // every case ended as expected, 1 otherwise, 2 on a bad command line.
 #include <algorithm>
@@ -30,7 +32,7 @@ constexpr const char* kStalled = "stalled";
 
 struct Case {
   std::string group, name;
-  std::vector<std::string> overrides;             // on the aspiration scene
+  std::vector<std::string> overrides;             // on the scene (default: the aspiration cube)
   std::function<TetMesh(const Scene&)> mesh;      // default: the scene's
   std::function<void(LiverModel&)> prepare;       // e.g. an inverted start
   int steps = 1;                                  // dynamic: time steps
@@ -39,13 +41,15 @@ struct Case {
   // inverted elements, full steps without line search) and rounding, e.g. the thread count,
   // decides between them.
   std::vector<std::string> expected = {kConverged};
+  std::string scene = {};                         // empty: the default scene
+  std::vector<InstrumentOptions> instruments = {};  // added to the scene's
 };
 
 struct Outcome {
   std::string result;  // converged | detected | not converged | FAILED
   std::string reason;  // converged, or the rollback's reason
   std::string detail;
-  int steps = 0, newton = 0, factorizations = 0;
+  int steps = 0, newton = 0, factorizations = 0, contacts = 0;  // contacts: the most in one step
   double residual = 0, max_u = 0, ms = 0;
   int inverted_start = 0, inverted_end = 0;
   double min_quality = 0;
@@ -116,7 +120,8 @@ std::function<void(LiverModel&)> fold_above(double plane) {
 
 Outcome run(const Case& c, const std::string& scene_path) {
   Outcome o;
-  const Scene scene = load_scene(scene_path, c.overrides);
+  Scene scene = load_scene(c.scene.empty() ? scene_path : c.scene, c.overrides);
+  scene.instruments.insert(scene.instruments.end(), c.instruments.begin(), c.instruments.end());
   TetMesh mesh;
   try {
     mesh = c.mesh ? c.mesh(scene) : load_scene_mesh(scene);
@@ -143,7 +148,11 @@ Outcome run(const Case& c, const std::string& scene_path) {
     o.newton += r.iterations;
     o.factorizations += r.factorizations;
     o.residual = r.residual;
-    if (!m.positions().allFinite()) {
+    o.contacts = std::max(o.contacts, r.contacts);
+    bool finite = m.positions().allFinite();
+    for (int i = 0; i < m.num_instruments(); ++i)
+      finite &= m.instrument_reaction(i).force.allFinite() && m.instrument_reaction(i).torque.allFinite();
+    if (!finite) {
       o.detail = "non-finite state after a step";
       break;
     }
@@ -161,7 +170,7 @@ Outcome run(const Case& c, const std::string& scene_path) {
       continue;
     }
     // Static: the next step continues from a capped one. Dynamic: every step must converge.
-    o.result = "not converged";
+    o.result = o.reason = "not converged";
     o.detail = "step " + std::to_string(k + 1) + ": " + r.message;
     if (dynamic) break;
   }
@@ -169,6 +178,67 @@ Outcome run(const Case& c, const std::string& scene_path) {
   o.max_u = m.max_displacement();
   o.inverted_end = count_inverted(m);
   return o;
+}
+
+// An instrument `name` of `type` and `radius` (m) along keyframes (s, tip position in mm).
+InstrumentOptions instrument(const std::string& name, InstrumentOptions::Type type, double radius,
+                             std::vector<std::pair<double, Eigen::Vector3d>> path) {
+  InstrumentOptions o;
+  o.name = name;
+  o.type = type;
+  o.radius = radius;
+  for (const auto& [t, mm] : path) {
+    InstrumentOptions::Keyframe k;
+    k.t = t;
+    k.position = 1e-3 * mm;
+    o.trajectory.push_back(k);
+  }
+  o.position = o.trajectory.front().position;
+  return o;
+}
+
+// Extreme contact on the probe cube (15 mm, bottom fixed, friction 0.3), dynamic at 1 ms:
+// every step must converge, to 1e-6 (the benchmark's converged contact dynamics: Newton-Krylov
+// with contacts stagnates between 1e-7 and 1e-8, doc/contact.md).
+void contact_cases(std::vector<Case>& v) {
+  using Type = InstrumentOptions::Type;
+  using V3 = Eigen::Vector3d;
+  const std::string cube = LIVER_SIM_PROBE_SCENE;
+  const std::vector<std::string> dynamic = {"solver.mode=dynamic", "solver.dt=0.001", "solver.tolerance=1e-6"};
+  auto add = [&](const std::string& name, std::vector<InstrumentOptions> instruments, int steps, bool quick,
+                 std::vector<std::string> overrides = {}) {
+    Case c{"contact", name, dynamic, {}, {}, steps, quick};
+    c.overrides.insert(c.overrides.end(), overrides.begin(), overrides.end());
+    c.scene = cube;
+    c.instruments = std::move(instruments);
+    v.push_back(std::move(c));
+  };
+  // A 2 mm probe pressed 1.5 mm into the top, then in one frame on the far side face, 21 mm away.
+  add("probe jumps 21 mm in one frame",
+      {instrument("probe", Type::Probe, 0.002, {{0, V3(2, 2, 17.5)}, {0.005, V3(2, 2, 15.5)}, {0.010, V3(2, 2, 15.5)},
+                                       {0.011, V3(15.5, 13, 4)}})}, 20, true);
+  add("probe pressed 1.5 mm sweeping at 1 m/s",
+      {instrument("probe", Type::Probe, 0.002, {{0, V3(1, 7.5, 17.5)}, {0.005, V3(1, 7.5, 15.5)}, {0.018, V3(14, 7.5, 15.5)}})}, 20,
+      false);
+  // Pressed 15 mm along the diagonal into the top corner: the corner ends at mid-height.
+  const V3 corner(15, 15, 15), diagonal = V3(1, 1, 1).normalized();
+  add("probe pressed 15 mm into a corner",
+      {instrument("probe", Type::Probe, 0.002, {{0, corner + 2.5 * diagonal}, {0.03, corner + (2 - 15) * diagonal}})}, 35, false);
+  add("two probes squeezing 3 mm from opposite faces",
+      {instrument("left", Type::Probe, 0.002, {{0, V3(-2, 7.5, 10)}, {0.01, V3(1, 7.5, 10)}}),
+       instrument("right", Type::Probe, 0.002, {{0, V3(17, 7.5, 10)}, {0.01, V3(14, 7.5, 10)}})},
+      15, true);
+  InstrumentOptions grasper = instrument("grasper", Type::Grasper, 0.002, {{0, V3(7.5, 7.5, 15)}, {0.002, V3(7.5, 7.5, 15)},
+                                                                 {0.032, V3(7.5, 7.5, 30)}});
+  grasper.trajectory[1].closed = true;
+  add("grasper lifting the top 15 mm (stretch x2)", {grasper}, 35, false);
+  for (const char* mu : {"0", "1"})
+    add(std::string("probe sweeping 6 mm, friction ") + mu,
+        {instrument("probe", Type::Probe, 0.002, {{0, V3(4.5, 7.5, 17.5)}, {0.005, V3(4.5, 7.5, 15.5)}, {0.035, V3(10.5, 7.5, 15.5)}})},
+        35, std::string(mu) == "1", {std::string("contact.friction=") + mu});
+  // Triangles of the top face have 1.9 mm legs; a 0.3 mm tip pressed 1 mm inside one.
+  add("0.3 mm tip pressed 1 mm inside a triangle",
+      {instrument("probe", Type::Probe, 0.0003, {{0, V3(8.1, 7.8, 15.5)}, {0.01, V3(8.1, 7.8, 14.3)}})}, 15, true);
 }
 
 std::vector<Case> cases() {
@@ -207,6 +277,7 @@ std::vector<Case> cases() {
                {"loads.0.value=-1e5", "solver.mode=dynamic", "solver.dt=0.005"}, {}, {}, 10, true});
   v.push_back({"100 kPa step", "pressure +100 kPa, no line search, static", {"loads.0.value=1e5", "solver.line_search=false"},
                {}, {}, 1, false, chaotic});
+  contact_cases(v);
   return v;
 }
 
@@ -214,7 +285,8 @@ std::vector<Case> cases() {
 
 int main(int argc, char** argv) {
   bool quick = false;
-  std::string scene = LIVER_SIM_ASPIRATION_SCENE, csv;
+  std::string scene = LIVER_SIM_ASPIRATION_SCENE, csv, group;
+  std::vector<std::string> extra;  // --set K=V, after each case's own overrides
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--quick") {
@@ -223,23 +295,28 @@ int main(int argc, char** argv) {
       scene = argv[++i];
     } else if (a == "--csv" && i + 1 < argc) {
       csv = argv[++i];
+    } else if (a == "--group" && i + 1 < argc) {
+      group = argv[++i];
+    } else if (a == "--set" && i + 1 < argc) {
+      extra.push_back(argv[++i]);
     } else {
-      std::cerr << "usage: stress [--quick] [--scene FILE] [--csv FILE]\n";
+      std::cerr << "usage: stress [--quick] [--group NAME] [--set K=V]... [--scene FILE] [--csv FILE]\n";
       return 2;
     }
   }
   std::ofstream csv_out;
   if (!csv.empty()) {
     csv_out.open(csv);
-    csv_out << "group,case,expected,result,steps,newton,factorizations,residual,max_displacement_m,inverted_start,inverted_end,min_quality,ms,detail\n";
+    csv_out << "group,case,expected,result,steps,newton,factorizations,contacts,residual,max_displacement_m,inverted_start,inverted_end,min_quality,ms,detail\n";
   }
-  std::cout << "| group | case | expected | result | steps | Newton | factorisations | residual | max displacement (mm) | inverted start → end | min quality | time (ms) | detail |\n"
-            << "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+  std::cout << "| group | case | expected | result | steps | Newton | factorisations | contacts | residual | max displacement (mm) | inverted start → end | min quality | time (ms) | detail |\n"
+            << "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
   int unexpected = 0;
   const std::vector<Case> all = cases();
   for (size_t k = 0; k < all.size(); ++k) {
-    const Case& c = all[k];
-    if (quick && !c.quick) continue;
+    Case c = all[k];
+    c.overrides.insert(c.overrides.end(), extra.begin(), extra.end());
+    if ((quick && !c.quick) || (!group.empty() && c.group != group)) continue;
     std::cerr << "[" << k + 1 << "/" << all.size() << "] " << c.group << ": " << c.name << "\n";
     Outcome o;
     try {
@@ -255,12 +332,12 @@ int main(int argc, char** argv) {
     unexpected += !as_expected;
     const std::string result = (o.result == "detected" ? o.reason : o.result) + (as_expected ? "" : " (UNEXPECTED)");
     std::cout << std::setprecision(3) << "| " << c.group << " | " << c.name << " | " << expected << " | " << result << " | "
-              << o.steps << " | " << o.newton << " | " << o.factorizations << " | " << o.residual << " | " << o.max_u * 1e3 << " | "
+              << o.steps << " | " << o.newton << " | " << o.factorizations << " | " << o.contacts << " | " << o.residual << " | " << o.max_u * 1e3 << " | "
               << o.inverted_start << " → " << o.inverted_end << " | " << o.min_quality << " | " << std::setprecision(4)
               << o.ms << " | " << o.detail << " |\n";
     if (csv_out)
       csv_out << c.group << ",\"" << c.name << "\"," << expected << "," << result << "," << o.steps << "," << o.newton << ","
-              << o.factorizations << "," << o.residual << "," << o.max_u << "," << o.inverted_start << "," << o.inverted_end << "," << o.min_quality
+              << o.factorizations << "," << o.contacts << "," << o.residual << "," << o.max_u << "," << o.inverted_start << "," << o.inverted_end << "," << o.min_quality
               << "," << o.ms << ",\"" << o.detail << "\"\n";
   }
   std::cerr << (unexpected ? std::to_string(unexpected) + " case(s) did not end as expected\n" : "every case ended as expected\n");
