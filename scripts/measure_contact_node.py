@@ -3,10 +3,15 @@
 while a probe is driven at 30 Hz on instrument_pose, pressing 2-6 mm into the sagged right lobe
 and sweeping 1 cm sideways: how many of the poses reach a published mesh (each mesh carries the
 stamp of the pose it reflects), the pose -> mesh latency, and the contacts and force reported.
+With --clouds, camera clouds of the upper right lobe (record_demo_bag.py's, 0.5 mm noise, the
+probe's surroundings hidden) are registered at 5 Hz meanwhile: the probe must keep its contacts
+and its force while the clouds pull the surface.
 
-usage: scripts/measure_contact_node.sh [SECONDS]   (starts a master and the node, runs this)
+usage: scripts/measure_contact_node.sh [SECONDS] [--clouds]   (starts a master and the node, runs this)
 """
+import argparse
 import math
+import os
 import sys
 import time
 
@@ -14,6 +19,9 @@ import numpy as np
 import rospy
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from liver_sim.msg import SimulationStatus
+from sensor_msgs import point_cloud2
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Header
 from visualization_msgs.msg import Marker
 
 RADIUS = 0.0025    # m, the launch file's probe radius
@@ -22,9 +30,18 @@ RATE = 30.0        # Hz, poses
 
 
 def main():
-    duration = float(sys.argv[1]) if len(sys.argv) > 1 else 20.0
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("duration", nargs="?", type=float, default=20.0, help="s")
+    ap.add_argument("--clouds", action="store_true", help="register camera clouds at 5 Hz meanwhile")
+    args = ap.parse_args(rospy.myargv()[1:])
+    duration = args.duration
+    surface, rng = None, np.random.default_rng(0)
+    if args.clouds:
+        sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+        import record_demo_bag
+        surface = record_demo_bag.sagged_top_surface()
     rospy.init_node("liver_sim_measure_contact")
-    received, contacts, forces = {}, [], []
+    received, contacts, forces, registered = {}, [], [], []
 
     def on_mesh(m):
         t = m.header.stamp.to_nsec()
@@ -33,6 +50,7 @@ def main():
 
     def on_status(s):
         contacts.append(s.active_contacts)
+        registered.append(s.clouds_registered)
 
     def on_wrench(w):
         forces.append(w.wrench.force.z)
@@ -41,6 +59,7 @@ def main():
     rospy.Subscriber("/liver_sim/status", SimulationStatus, on_status, queue_size=100)
     rospy.Subscriber("/liver_sim/wrench", WrenchStamped, on_wrench, queue_size=100)
     pub = rospy.Publisher("/instrument_pose", PoseStamped, queue_size=1)
+    cloud_pub = rospy.Publisher("/points", PointCloud2, queue_size=1)
     # The node reaches its gravity equilibrium first (its status goes idle).
     idle = []
     sub = rospy.Subscriber("/liver_sim/status", SimulationStatus, lambda s: idle.append(s.state == "idle"))
@@ -49,7 +68,7 @@ def main():
         time.sleep(0.1)
     sub.unregister()
     time.sleep(0.5)
-    contacts.clear(), forces.clear()
+    contacts.clear(), forces.clear(), registered.clear()
 
     sent = []
     rate = rospy.Rate(RATE)
@@ -67,6 +86,10 @@ def main():
         msg.pose.orientation.w = 1.0
         pub.publish(msg)
         sent.append(msg.header.stamp)
+        if surface is not None and len(sent) % 6 == 0:
+            xy = np.array([msg.pose.position.x, msg.pose.position.y])
+            cloud_pub.publish(point_cloud2.create_cloud_xyz32(Header(stamp=msg.header.stamp, frame_id="liver"),
+                                                              record_demo_bag.camera_cloud(surface, rng, xy)))
         rate.sleep()
     time.sleep(1.0)
     lat = np.array([(received[s.to_nsec()] - s).to_sec() * 1e3 for s in sent if s.to_nsec() in received])
@@ -77,8 +100,13 @@ def main():
         print(f"pose -> mesh latency: median {np.median(lat):.1f} ms, p95 {np.percentile(lat, 95):.1f} ms, "
               f"max {lat.max():.1f} ms")
     if contacts:
-        print(f"active contacts: median {np.median(contacts):.0f}, max {max(contacts)}; "
-              f"force z: median {np.median(forces):.3f} N, max {max(forces):.3f} N")
+        touching = np.mean(np.array(contacts) > 0) * 100
+        pushing = np.mean(np.array(forces) > 0) * 100 if forces else 0.0
+        print(f"active contacts: median {np.median(contacts):.0f}, min {min(contacts)}, max {max(contacts)} "
+              f"(status messages with contacts: {touching:.1f}%); force z: median {np.median(forces):.3f} N, "
+              f"min {min(forces):.3f} N, max {max(forces):.3f} N (wrench messages pushing back: {pushing:.1f}%)")
+    if registered:
+        print(f"clouds registered: {registered[-1] - registered[0]}")
 
 
 if __name__ == "__main__":
