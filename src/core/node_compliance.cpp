@@ -59,6 +59,10 @@ void NodeCompliance::keep_only(const std::vector<int>& nodes) {
   }
   nodes_.swap(kept_nodes);
   columns_of_.resize(3 * nodes_.size());
+  // The blocks grow with the square of the nodes: after a large contact patch has gone, give
+  // the memory back rather than keep its high-water mark for the rest of the session.
+  const Eigen::Index needed = 3 * static_cast<Eigen::Index>(nodes_.size());
+  if (blocks_.cols() > 4 * needed + 96) blocks_.conservativeResize(2 * needed, 2 * needed);
 }
 
 Eigen::Matrix3d NodeCompliance::block(int a, int b) const {
