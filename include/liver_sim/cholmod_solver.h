@@ -6,7 +6,8 @@
 // x = P^T L^-T z. The forward half of a unit vector is nonzero only on the path of its column
 // up the supernodal elimination tree; such sparse columns give entries of A^-1 as inner
 // products, e_a^T A^-1 e_b = (L^-1 P e_a) . (L^-1 P e_b), at the cost of the paths alone.
-// Knows nothing of the physics.
+// Knows nothing of the physics. It runs on the calling thread: constructing one sets OpenBLAS
+// to one thread and allows no active OpenMP level, process-wide (cholmod_solver.cpp says why).
 #pragma once
 
 #include <cholmod.h>

@@ -69,8 +69,8 @@ class LiverModel {
 
   const SolverOptions& solver_options() const { return stepper_.options(); }
   // Strategy, iteration cap, tolerance, line search, dt and damping, from the next step on (the
-  // same scene run fast or exact). The mode cannot change. Returns "" on success, else the
-  // validation message (nothing changed).
+  // same scene run fast or exact). The mode and the threads cannot change. Returns "" on
+  // success, else the validation message (nothing changed).
   std::string set_solver_options(const SolverOptions& solver) { return stepper_.set_options(solver); }
 
   const TetMesh& mesh() const { return mechanics_.mesh(); }

@@ -21,6 +21,7 @@
 #include "liver_sim/mesh.h"
 #include "liver_sim/scene.h"
 #include "liver_sim/sparse_pattern.h"
+#include "liver_sim/worker_pool.h"
 
 namespace liver_sim {
 
@@ -61,6 +62,8 @@ class MechanicalModel {
   bool fixed_by_scene(int node) const { return fixed_by_scene_[node]; }
   const ParenchymaOptions& parenchyma() const { return parenchyma_; }
   const SparsePattern& pattern() const { return pattern_; }
+  // The threads of the element loops (solver.threads): forces, damping products, membrane frames.
+  WorkerPool& workers() { return workers_; }
   double length_scale() const { return length_scale_; }  // bounding-box diagonal (m)
   // Residual (N) below which a state counts as converged: round-off, 1e-12 E L^2.
   double force_floor() const { return force_floor_; }
@@ -130,10 +133,15 @@ class MechanicalModel {
   void set_fixed(const std::vector<int>& nodes);
   // f (of `size`) = the sum over the tetrahedra, four at a time, and the active membranes of the
   // element vectors tet_block(first, count, fe) and triangle(t, fm) write; returns the sum of
-  // what they return (an energy).
+  // what they return (an energy). The same bits for any thread count (see element_vectors_).
   template <typename TetBlock, typename Triangle>
   double element_pass(Eigen::Index size, Eigen::VectorXd& f, const TetBlock& tet_block, const Triangle& triangle);
-
+  // For each node, where its 3-blocks lie in the element vectors (offsets in doubles), in
+  // element order.
+  struct NodeGather {
+    std::vector<int> start;  // per node, into slot; one past the last node at the end
+    std::vector<int> slot;
+  };
   TetMesh mesh_;
   Eigen::MatrixX3i boundary_;
   std::vector<char> on_boundary_;  // per node
@@ -146,10 +154,16 @@ class MechanicalModel {
   SparsePattern pattern_;
   std::vector<int> tet_map_, tri_map_, beam_map_;  // scatter maps: 144 per tetrahedron, 81 per triangle, 576 per beam
   std::vector<double> stiffness_;
-  int threads_ = 1;  // OpenMP threads for the element loops
-  std::vector<Eigen::VectorXd> thread_forces_;  // per thread but the first
-  std::vector<std::vector<double>> thread_stiffness_;
-  std::vector<double> thread_energy_;
+  WorkerPool workers_;
+  // With more than one thread, element_pass writes every element's vector and every tetrahedron
+  // block's energy here, then adds them per node (and the energies) in the order in which one
+  // thread adds as it goes: the result is that of one thread, to the last bit.
+  struct ElementVectors {
+    std::vector<Vector12d> tet;
+    std::vector<Vector9d> membrane;  // per capsule_active_ entry
+    std::vector<double> block_energy, membrane_energy;
+    NodeGather tet_gather, membrane_gather;
+  } element_vectors_;
   struct DampingSnapshot {
     std::vector<Eigen::Matrix3d> tet_rotation;
     std::vector<Eigen::Matrix<double, 3, 2>> membrane_frame;

@@ -24,7 +24,10 @@ class MembraneCST {
   void set_material(const CapsuleOptions& material);
 
   // Updates the in-plane frame of every triangle from current positions x (3 #V).
-  void update_rotations(const Eigen::VectorXd& x);
+  void update_rotations(const Eigen::VectorXd& x) { update_rotations(x, 0, size()); }
+  // The same for triangles first .. first + count - 1, four at a time from first (a multiple of
+  // 4): a loop split at multiples of 4 gives the frames of the whole loop to the last bit.
+  void update_rotations(const Eigen::VectorXd& x, int first, int count);
   double element_force(int e, const Eigen::VectorXd& x, Vector9d& f) const;  // returns 1/2 u^T K u (J)
   void element_tangent(int e, Matrix9d& K) const;
   // A K A^T v_e for a given in-plane frame A (3x2): the damping force with the stiffness of an

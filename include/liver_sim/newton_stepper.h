@@ -68,7 +68,8 @@ class NewtonStepper {
 
   const SolverOptions& options() const { return solver_; }
   // Strategy, iteration cap, tolerance, line search, dt and damping, from the next step on. The
-  // mode cannot change. Returns "" on success, else the validation message (nothing changed).
+  // mode and the threads cannot change. Returns "" on success, else the validation message
+  // (nothing changed).
   std::string set_options(const SolverOptions& solver);
 
   const Eigen::VectorXd& positions() const { return x_; }  // 3 #V, node-major (m)

@@ -84,6 +84,10 @@ struct SolverOptions {
   bool line_search = true;        // backtracking on the residual norm
   double rayleigh_mass = 0.0;     // 1/s, damping D = a M + b K
   double rayleigh_stiffness = 0.0;  // s
+  // Threads of the element loops, in [1, 64] (worker_pool.h). One suits a computer that other
+  // programs share; more gain only on idle, independent cores (doc/performance.md). Results do
+  // not depend on it, to the last bit.
+  int threads = 1;
 };
 
 struct ProbeOptions {

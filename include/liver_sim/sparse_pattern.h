@@ -37,7 +37,6 @@ class SparsePattern {
   std::vector<int> column_start_;
   std::vector<int> row_index_;
   std::vector<int> diagonal_;
-  mutable std::vector<Eigen::VectorXd> partial_;  // multiply's per-thread sums, kept between calls
 };
 
 // Adds a dense element matrix into `values` through its scatter map.

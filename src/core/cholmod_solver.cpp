@@ -1,11 +1,33 @@
 #include "liver_sim/cholmod_solver.h"
 
+#include <dlfcn.h>
+#include <omp.h>
+
 #include <cmath>
 #include <stdexcept>
 
 namespace liver_sim {
+namespace {
+
+// CHOLMOD on the calling thread, process-wide (both settings belong to the process):
+// - its own OpenMP loops (copies into the supernodes) ask for 4 threads whatever the machine,
+//   and on two vCPUs their waits cost more than their work: a phantom factorisation took 70-75
+//   ms against 44 on one thread, 147-152 against 92-99 ms beside a busy thread per core
+//   (doc/performance.md#threads-on-a-shared-computer). With no active OpenMP level allowed,
+//   every OpenMP region of the process runs on the thread that meets it;
+// - OpenBLAS (its dense blocks) keeps a thread pool of its own whose split of a block changes
+//   the factor's last bits with its thread count, and so every later result. Other BLAS
+//   libraries are left as they are.
+void cholmod_on_calling_thread() {
+  omp_set_max_active_levels(0);
+  using SetThreads = void (*)(int);
+  if (const auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(1);
+}
+
+}  // namespace
 
 CholmodSolver::CholmodSolver() {
+  cholmod_on_calling_thread();
   cholmod_start(&common_);
   // Supernodal always (CHOLMOD would pick simplicial for tiny matrices): one factor layout for
   // forward_unit to walk.

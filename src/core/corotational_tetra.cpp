@@ -307,10 +307,7 @@ Eigen::Matrix<double, 3, 12> polar_rotation_derivative(const Eigen::Matrix3d& R,
 
 
 void CorotationalTetra::update_rotations(const Eigen::VectorXd& x) {
-  const int n = size();
-  // Independent per element: split over the cores (OpenMP).
-#pragma omp parallel for schedule(static)
-  for (int e = 0; e < n; ++e) update_rotation(e, x, deformation_gradient(e, x));
+  for (int e = 0; e < size(); ++e) update_rotation(e, x, deformation_gradient(e, x));
 }
 
 void CorotationalTetra::reset_rotations() {
@@ -321,9 +318,7 @@ void CorotationalTetra::reset_rotations() {
 
 void CorotationalTetra::predict_rotations(bool continued) {
   if (method_ != RotationMethod::Polar) return;
-  const int n = size();
-#pragma omp parallel for schedule(static)
-  for (int e = 0; e < n; ++e) {
+  for (int e = 0; e < size(); ++e) {
     const Eigen::Quaterniond q = q_[e];
     if (continued) q_[e] = (q * q_step_[e].conjugate() * q).normalized();
     q_step_[e] = q;

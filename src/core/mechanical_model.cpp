@@ -1,6 +1,5 @@
 #include "liver_sim/mechanical_model.h"
 
-#include <omp.h>
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -23,6 +22,28 @@ const Options& validated(const Options& o) {
   return o;
 }
 
+// Chunks of the element loops: long enough that claiming one costs nothing, short enough that a
+// helper taken off the processor in the middle of one holds the others up briefly.
+constexpr int kBlocksPerChunk = 16;      // blocks of four tetrahedra
+constexpr int kTrianglesPerChunk = 64;   // a multiple of 4: membrane frames go four at a time
+constexpr int kNodesPerChunk = 256;
+
+int chunks(int items, int per_chunk) { return (items + per_chunk - 1) / per_chunk; }
+
+// Where each node's 3-blocks lie in the vectors of `elements` elements of k nodes (3 k doubles
+// each, node_of(e, j) the j-th node of element e), in element order.
+template <typename NodeOf, typename NodeGather>
+void gather_nodes(int nodes, int elements, int k, const NodeOf& node_of, NodeGather& g) {
+  g.start.assign(nodes + 1, 0);
+  for (int e = 0; e < elements; ++e)
+    for (int j = 0; j < k; ++j) ++g.start[node_of(e, j) + 1];
+  for (int i = 0; i < nodes; ++i) g.start[i + 1] += g.start[i];
+  g.slot.resize(g.start[nodes]);
+  std::vector<int> next(g.start.begin(), g.start.end() - 1);
+  for (int e = 0; e < elements; ++e)
+    for (int j = 0; j < k; ++j) g.slot[next[node_of(e, j)]++] = 3 * (k * e + j);
+}
+
 Eigen::VectorXd flatten(const Eigen::MatrixX3d& V) {
   Eigen::VectorXd x(3 * V.rows());
   for (int i = 0; i < V.rows(); ++i) x.segment<3>(3 * i) = V.row(i).transpose();
@@ -38,7 +59,8 @@ MechanicalModel::MechanicalModel(TetMesh mesh, const Scene& scene)
       capsule_(validated(scene.capsule)),
       tetra_(mesh_.V, mesh_.T, parenchyma_),
       membrane_(mesh_.V, boundary_, capsule_),
-      vessels_(tetra_, mesh_.V, scene.vessels, parenchyma_.rotation) {
+      vessels_(tetra_, mesh_.V, scene.vessels, parenchyma_.rotation),
+      workers_(validated(scene.solver).threads) {
   const int n = static_cast<int>(mesh_.V.rows());
   const int dofs = 3 * n;
   pattern_ = SparsePattern(n, mesh_.T, vessels_.coupled_nodes());
@@ -59,13 +81,11 @@ MechanicalModel::MechanicalModel(TetMesh mesh, const Scene& scene)
   beam_map_.reserve(576 * vessels_.coupled_nodes().size());
   for (const std::vector<int>& g : vessels_.coupled_nodes()) pattern_.append_scatter_map(g.data(), 8, beam_map_);
   stiffness_.assign(pattern_.nonzeros(), 0.0);
-  threads_ = std::max(1, omp_get_max_threads());
-  thread_forces_.resize(threads_);
-  thread_energy_.assign(threads_, 0.0);
-  thread_stiffness_.assign(threads_, std::vector<double>());
-  for (int t = 1; t < threads_; ++t) {
-    thread_forces_[t].setZero(dofs);
-    thread_stiffness_[t].assign(pattern_.nonzeros(), 0.0);
+  if (workers_.threads() > 1) {
+    const int tetrahedra = tetra_.size();
+    element_vectors_.tet.resize(tetrahedra);
+    element_vectors_.block_energy.resize((tetrahedra + 3) / 4);
+    gather_nodes(n, tetrahedra, 4, [&](int e, int j) { return mesh_.T(e, j); }, element_vectors_.tet_gather);
   }
 
   X_ = flatten(mesh_.V);
@@ -185,6 +205,13 @@ std::string MechanicalModel::set_capsule(const CapsuleOptions& capsule) {
   rotations_at_.resize(0);  // the membrane rotations may not follow the last evaluation
   capsule_active_ = std::move(active);
   capsule_ = capsule;
+  if (workers_.threads() > 1) {
+    const int triangles = static_cast<int>(capsule_active_.size());
+    element_vectors_.membrane.resize(triangles);
+    element_vectors_.membrane_energy.resize(triangles);
+    gather_nodes(static_cast<int>(mesh_.V.rows()), triangles, 3,
+                 [&](int i, int j) { return boundary_(capsule_active_[i], j); }, element_vectors_.membrane_gather);
+  }
   return "";
 }
 
@@ -207,41 +234,58 @@ template <typename TetBlock, typename Triangle>
 double MechanicalModel::element_pass(Eigen::Index size, Eigen::VectorXd& f, const TetBlock& tet_block,
                                      const Triangle& triangle) {
   f.setZero(size);
-  const int active = static_cast<int>(capsule_active_.size());
-  // Elements split over the cores, each thread adding into its own force vector (thread 0 into
-  // f); the vectors are summed in a fixed order, so a result depends only on the thread count.
-#pragma omp parallel num_threads(threads_)
-  {
-    const int thread = omp_get_thread_num();
-    Eigen::VectorXd& ft = thread == 0 ? f : thread_forces_[thread];
-    if (thread > 0) ft.setZero(size);
+  const int tetrahedra = tetra_.size(), blocks = (tetrahedra + 3) / 4;
+  const int triangles = capsule_.enabled ? static_cast<int>(capsule_active_.size()) : 0;
+  if (workers_.threads() == 1) {  // add as it goes
     double sum = 0;
     Vector12d fe[4];
-    const int tetrahedra = tetra_.size();
-#pragma omp for schedule(static) nowait
-    for (int block = 0; block < (tetrahedra + 3) / 4; ++block) {  // four at a time: see polar_rotations
+    for (int block = 0; block < blocks; ++block) {  // four at a time: see polar_rotations
       const int first = 4 * block, count = std::min(4, tetrahedra - first);
       sum += tet_block(first, count, fe);
       for (int i = 0; i < count; ++i)
-        for (int k = 0; k < 4; ++k) ft.segment<3>(3 * mesh_.T(first + i, k)) += fe[i].segment<3>(3 * k);
+        for (int k = 0; k < 4; ++k) f.segment<3>(3 * mesh_.T(first + i, k)) += fe[i].segment<3>(3 * k);
     }
-    if (capsule_.enabled) {
-      Vector9d fm;
-#pragma omp for schedule(static) nowait
-      for (int i = 0; i < active; ++i) {
-        const int t = capsule_active_[i];
-        sum += triangle(t, fm);
-        for (int k = 0; k < 3; ++k) ft.segment<3>(3 * boundary_(t, k)) += fm.segment<3>(3 * k);
+    Vector9d fm;
+    for (int i = 0; i < triangles; ++i) {
+      const int t = capsule_active_[i];
+      sum += triangle(t, fm);
+      for (int k = 0; k < 3; ++k) f.segment<3>(3 * boundary_(t, k)) += fm.segment<3>(3 * k);
+    }
+    return sum;
+  }
+  // Several threads: the element vectors first, in chunks on any thread, then each node's sum in
+  // the order above.
+  ElementVectors& v = element_vectors_;
+  const int tet_chunks = chunks(blocks, kBlocksPerChunk);
+  workers_.run(tet_chunks + chunks(triangles, kTrianglesPerChunk), [&](int chunk) {
+    if (chunk < tet_chunks) {
+      for (int block = chunk * kBlocksPerChunk; block < std::min(blocks, (chunk + 1) * kBlocksPerChunk); ++block) {
+        const int first = 4 * block;
+        v.block_energy[block] = tet_block(first, std::min(4, tetrahedra - first), &v.tet[first]);
       }
+    } else {
+      const int first = (chunk - tet_chunks) * kTrianglesPerChunk;
+      for (int i = first; i < std::min(triangles, first + kTrianglesPerChunk); ++i)
+        v.membrane_energy[i] = triangle(capsule_active_[i], v.membrane[i]);
     }
-    thread_energy_[thread] = sum;
-  }
-  double total = thread_energy_[0];
-  for (int thread = 1; thread < threads_; ++thread) {
-    f += thread_forces_[thread];
-    total += thread_energy_[thread];
-  }
-  return total;
+  });
+  const int nodes = static_cast<int>(mesh_.V.rows());
+  workers_.run(chunks(nodes, kNodesPerChunk), [&](int chunk) {
+    const double* tet = v.tet.empty() ? nullptr : v.tet[0].data();
+    const double* membrane = v.membrane.empty() ? nullptr : v.membrane[0].data();
+    for (int node = chunk * kNodesPerChunk; node < std::min(nodes, (chunk + 1) * kNodesPerChunk); ++node) {
+      auto fn = f.segment<3>(3 * node);
+      for (int s = v.tet_gather.start[node]; s < v.tet_gather.start[node + 1]; ++s)
+        fn += Eigen::Map<const Eigen::Vector3d>(tet + v.tet_gather.slot[s]);
+      if (triangles == 0) continue;
+      for (int s = v.membrane_gather.start[node]; s < v.membrane_gather.start[node + 1]; ++s)
+        fn += Eigen::Map<const Eigen::Vector3d>(membrane + v.membrane_gather.slot[s]);
+    }
+  });
+  double sum = 0;
+  for (double e : v.block_energy) sum += e;
+  for (int i = 0; i < triangles; ++i) sum += v.membrane_energy[i];
+  return sum;
 }
 
 void MechanicalModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) {
@@ -251,7 +295,13 @@ void MechanicalModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd&
     f = internal_at_;
     return;
   }
-  if (capsule_.enabled) membrane_.update_rotations(x);  // the tetrahedra's rotations come with their forces
+  if (capsule_.enabled) {  // the tetrahedra's rotations come with their forces
+    const int triangles = membrane_.size();
+    workers_.run(chunks(triangles, kTrianglesPerChunk), [&](int chunk) {
+      const int first = chunk * kTrianglesPerChunk;
+      membrane_.update_rotations(x, first, std::min(kTrianglesPerChunk, triangles - first));
+    });
+  }
   // The strain energy comes with the forces, at little extra cost.
   tissue_energy_at_ = element_pass(
       x.size(), f, [&](int first, int count, Vector12d* fe) { return tetra_.element_forces(first, count, x, fe); },
@@ -341,30 +391,22 @@ void MechanicalModel::damping_forces(const Eigen::VectorXd& v, Eigen::VectorXd& 
 }
 
 void MechanicalModel::assemble(double k, double m, std::vector<double>& values) {
-  const int active = static_cast<int>(capsule_active_.size());
-#pragma omp parallel num_threads(threads_)
-  {  // as internal_forces: one matrix value array per thread, summed in order
-    const int thread = omp_get_thread_num();
-    std::vector<double>& kt = thread == 0 ? stiffness_ : thread_stiffness_[thread];
-    std::fill(kt.begin(), kt.end(), 0.0);
-    Matrix12d Ke;
-#pragma omp for schedule(static) nowait
-    for (int e = 0; e < tetra_.size(); ++e) {
-      tetra_.element_tangent(e, Ke);
-      scatter_add(Ke, &tet_map_[144 * e], kt);
-    }
-    if (capsule_.enabled) {
-      Matrix9d Km;
-#pragma omp for schedule(static) nowait
-      for (int i = 0; i < active; ++i) {
-        const int t = capsule_active_[i];
-        membrane_.element_tangent(t, Km);
-        scatter_add(Km, &tri_map_[81 * t], kt);
-      }
+  // On one thread: the values a tetrahedron adds overlap its neighbours', and a split whose sums
+  // do not depend on the thread count would need the element matrices kept (13 MB on the
+  // phantom). It runs when the factor is refreshed, beside a factorisation ten times longer.
+  std::fill(stiffness_.begin(), stiffness_.end(), 0.0);
+  Matrix12d Ke;
+  for (int e = 0; e < tetra_.size(); ++e) {
+    tetra_.element_tangent(e, Ke);
+    scatter_add(Ke, &tet_map_[144 * e], stiffness_);
+  }
+  if (capsule_.enabled) {
+    Matrix9d Km;
+    for (int t : capsule_active_) {
+      membrane_.element_tangent(t, Km);
+      scatter_add(Km, &tri_map_[81 * t], stiffness_);
     }
   }
-  for (int thread = 1; thread < threads_; ++thread)
-    for (size_t i = 0; i < stiffness_.size(); ++i) stiffness_[i] += thread_stiffness_[thread][i];
   vessels_.add_tangent(beam_map_, stiffness_);
   values.resize(stiffness_.size());
   for (size_t i = 0; i < stiffness_.size(); ++i) values[i] = k * stiffness_[i];

@@ -135,14 +135,13 @@ void MembraneCST::update_frames(int first, const Eigen::VectorXd& x) {
   }
 }
 
-void MembraneCST::update_rotations(const Eigen::VectorXd& x) {
-  const int n = size();
-#pragma omp parallel for schedule(static)
-  for (int block = 0; block < (n + 3) / 4; ++block) {
-    if (4 * block + 4 <= n) {
-      update_frames(4 * block, x);
+void MembraneCST::update_rotations(const Eigen::VectorXd& x, int first, int count) {
+  const int end = first + count;
+  for (int block = first; block < end; block += 4) {
+    if (block + 4 <= end) {
+      update_frames(block, x);
     } else {
-      for (int e = 4 * block; e < n; ++e) frame_[e] = current_frame(e, x);
+      for (int e = block; e < end; ++e) frame_[e] = current_frame(e, x);
     }
   }
 }

@@ -47,6 +47,7 @@ std::string NewtonStepper::set_options(const SolverOptions& solver) {
   const std::string error = validate(solver);
   if (!error.empty()) return error;
   if (solver.mode != solver_.mode) return "solver.mode cannot change on a running model";
+  if (solver.threads != solver_.threads) return "solver.threads cannot change on a running model";
   // The factored matrix depends on dt and the damping (dynamic mode); the strategy and the
   // iteration controls leave it valid.
   if (solver.dt != solver_.dt || solver.rayleigh_mass != solver_.rayleigh_mass ||

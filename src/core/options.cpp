@@ -3,6 +3,8 @@
 #include <cmath>
 #include <sstream>
 
+#include "liver_sim/worker_pool.h"
+
 namespace liver_sim {
 namespace {
 
@@ -55,7 +57,11 @@ std::string validate(const SolverOptions& o) {
                       o.max_iterations >= 1 ? "" : message("solver.max_iterations", ">= 1", o.max_iterations),
                       positive("solver.tolerance", o.tolerance),
                       non_negative("solver.rayleigh_mass", o.rayleigh_mass),
-                      non_negative("solver.rayleigh_stiffness", o.rayleigh_stiffness)});
+                      non_negative("solver.rayleigh_stiffness", o.rayleigh_stiffness),
+                      o.threads >= 1 && o.threads <= WorkerPool::kMaxThreads
+                          ? ""
+                          : message("solver.threads", ("in [1, " + std::to_string(WorkerPool::kMaxThreads) + "]").c_str(),
+                                    o.threads)});
 }
 
 std::string validate(const VesselOptions& o) {

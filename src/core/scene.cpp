@@ -378,7 +378,7 @@ class Reader {
 
   void read_solver(const YAML::Node& v, SolverOptions& o) const {
     check_keys(v, "solver", {"mode", "strategy", "predictor", "dt", "steps", "max_iterations", "tolerance",
-                             "line_search", "rayleigh_mass", "rayleigh_stiffness"});
+                             "line_search", "rayleigh_mass", "rayleigh_stiffness", "threads"});
     if (v["strategy"]) o.strategy = strategy(v["strategy"], "solver.strategy");
     if (v["predictor"]) {
       const std::string p = word(v["predictor"], "solver.predictor", {"none", "constant_velocity", "constant_acceleration"});
@@ -396,6 +396,7 @@ class Reader {
     if (v["line_search"]) o.line_search = boolean(v["line_search"], "solver.line_search");
     if (v["rayleigh_mass"]) o.rayleigh_mass = number(v["rayleigh_mass"], "solver.rayleigh_mass");
     if (v["rayleigh_stiffness"]) o.rayleigh_stiffness = number(v["rayleigh_stiffness"], "solver.rayleigh_stiffness");
+    if (v["threads"]) o.threads = integer(v["threads"], "solver.threads");
   }
 
   std::string origin_;

@@ -1,9 +1,5 @@
 #include "liver_sim/sparse_pattern.h"
 
-#include <omp.h>
-
-#include <algorithm>
-
 #include <algorithm>
 
 namespace liver_sim {
@@ -61,26 +57,17 @@ void SparsePattern::append_scatter_map(const int* nodes, int k, std::vector<int>
 
 void SparsePattern::multiply(const std::vector<double>& values, const Eigen::VectorXd& x,
                              Eigen::VectorXd& y) const {
-  // Columns split over the cores; each thread adds into its own vector (thread 0 into y), and
-  // the vectors are summed in order.
-  const int threads = std::max(1, omp_get_max_threads());
-  if (static_cast<int>(partial_.size()) < threads) partial_.resize(threads);
+  // One thread: each stored entry adds into two places (it stands for its symmetric twin too);
+  // a split over threads whose sums did not depend on the thread count would need a second,
+  // row-wise index of the pattern, for a product that only the conjugate-gradient strategies use.
   y.setZero(rows());
-#pragma omp parallel num_threads(threads)
-  {
-    const int thread = omp_get_thread_num();
-    Eigen::VectorXd& yt = thread == 0 ? y : partial_[thread];
-    if (thread > 0) yt.setZero(rows());
-#pragma omp for schedule(static)
-    for (int col = 0; col < rows(); ++col) {
-      for (int k = column_start_[col]; k < column_start_[col + 1]; ++k) {
-        const int row = row_index_[k];
-        yt[row] += values[k] * x[col];
-        if (row != col) yt[col] += values[k] * x[row];
-      }
+  for (int col = 0; col < rows(); ++col) {
+    for (int k = column_start_[col]; k < column_start_[col + 1]; ++k) {
+      const int row = row_index_[k];
+      y[row] += values[k] * x[col];
+      if (row != col) y[col] += values[k] * x[row];
     }
   }
-  for (int thread = 1; thread < threads; ++thread) y += partial_[thread];
 }
 
 }  // namespace liver_sim
