@@ -17,18 +17,21 @@
 #include <visualization_msgs/Marker.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <algorithm>
 #include <cmath>
 #include <deque>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <sstream>
+#include <thread>
 
 #include "liver_sim/InstrumentCommand.h"
 #include "liver_sim/SetCapsule.h"
 #include "liver_sim/SimulationStatus.h"
 #include "liver_sim/liver_model.h"
 #include "liver_sim/registration.h"
+#include "liver_sim/worker_pool.h"
 #include "mesh_marker.h"
 
 namespace liver_sim {
@@ -79,10 +82,10 @@ class LiverSimNode {
       throw std::invalid_argument(
           "~rate, ~publish_rate, ~instrument_radius, ~instrument_length and ~color_scale_max must be > 0");
     if (!(surface_alpha_ >= 0 && surface_alpha_ <= 1)) throw std::invalid_argument("~surface_alpha must be in [0, 1]");
-    // ~parenchyma/*, ~capsule/*, ~solver/* override the scalars of the scene file. The node
-    // steps in real-time frames by default: modified Newton on a reused factor (contacts carried
-    // in the same solve), two iterations a frame, a step that has not converged continuing in the
-    // next frame; ~solver/strategy and ~solver/max_iterations change that.
+    // ~parenchyma/*, ~capsule/*, ~solver/* override the scalars of the scene file; ~threads is
+    // solver.threads. The node steps in real-time frames by default: modified Newton on a reused
+    // factor (contacts carried in the same solve), two iterations a frame, a step that has not
+    // converged continuing in the next frame; ~solver/strategy and ~solver/max_iterations change that.
     std::vector<std::string> overrides = {"solver.strategy=modified_newton", "solver.max_iterations=2"};
     for (const char* section : {"parenchyma", "capsule", "solver"}) {
       XmlRpc::XmlRpcValue values;
@@ -90,6 +93,13 @@ class LiverSimNode {
       if (values.getType() != XmlRpc::XmlRpcValue::TypeStruct)
         throw std::invalid_argument(std::string("~") + section + " must be a map of scalars");
       for (auto& kv : values) overrides.push_back(std::string(section) + "." + kv.first + "=" + scalar_text(kv.second));
+    }
+    int threads = 0;
+    if (pnh.getParam("threads", threads)) {
+      if (threads < 1 || threads > WorkerPool::kMaxThreads)
+        throw std::invalid_argument("~threads must be in [1, " + std::to_string(WorkerPool::kMaxThreads) + "] (got " +
+                                    std::to_string(threads) + ")");
+      overrides.push_back("solver.threads=" + std::to_string(threads));
     }
     const Scene scene = load_scene(scene_path, overrides);
     try {
@@ -610,6 +620,32 @@ class LiverSimNode {
 int main(int argc, char** argv) {
   ros::init(argc, argv, "liver_sim");
   ros::NodeHandle nh, pnh("~");
+  // The simulation thread (this one): its processors and its scheduling, set before the model
+  // is built so that the model's helper threads inherit them. Refused settings leave it as it was.
+  const std::vector<int> processors = liver_sim::processors_of_calling_thread();
+  std::vector<int> cpu_affinity;
+  int realtime_priority = 0;
+  pnh.param("cpu_affinity", cpu_affinity, std::vector<int>{});
+  pnh.param("realtime_priority", realtime_priority, 0);
+  for (int cpu : cpu_affinity)
+    if (std::find(processors.begin(), processors.end(), cpu) == processors.end()) {
+      ROS_FATAL("liver_sim: ~cpu_affinity: processor %d is not one this process may use", cpu);
+      return 1;
+    }
+  if (realtime_priority < 0 || realtime_priority > 99) {
+    ROS_FATAL("liver_sim: ~realtime_priority must be in [0, 99] (got %d)", realtime_priority);
+    return 1;
+  }
+  if (!cpu_affinity.empty()) {
+    const std::string refused = liver_sim::pin_calling_thread(cpu_affinity);
+    if (!refused.empty()) ROS_WARN("liver_sim: ~cpu_affinity refused (%s); the simulation runs on any processor", refused.c_str());
+  }
+  if (realtime_priority != 0) {
+    const std::string refused = liver_sim::set_realtime_priority(realtime_priority);
+    if (!refused.empty())
+      ROS_WARN("liver_sim: ~realtime_priority %d refused (%s); the simulation runs at normal priority",
+               realtime_priority, refused.c_str());
+  }
   std::unique_ptr<liver_sim::LiverSimNode> node;
   try {
     node = std::make_unique<liver_sim::LiverSimNode>(nh, pnh);
@@ -617,8 +653,18 @@ int main(int argc, char** argv) {
     ROS_FATAL("liver_sim: %s", e.what());
     return 1;
   }
-  ros::AsyncSpinner spinner(2);  // callbacks and services run beside the simulation loop
-  spinner.start();
+  // Callbacks and services run beside the simulation loop, at normal priority, on the processors
+  // the simulation leaves (all of them when it leaves none): their threads inherit both from the
+  // thread that starts them.
+  ros::AsyncSpinner spinner(2);
+  std::thread([&] {
+    std::vector<int> others;
+    for (int cpu : processors)
+      if (std::find(cpu_affinity.begin(), cpu_affinity.end(), cpu) == cpu_affinity.end()) others.push_back(cpu);
+    liver_sim::set_realtime_priority(0);
+    liver_sim::pin_calling_thread(others.empty() ? processors : others);
+    spinner.start();
+  }).join();
   node->run();
   return 0;
 }

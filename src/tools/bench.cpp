@@ -7,12 +7,21 @@
 // timed, and its displacement field is compared with a converged reference run (Newton-Krylov to
 // a residual of 1e-10).
 //   bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]
-//         [--frequency F] [--strategy SPEC]... [--csv FILE] [--quiet]
+//         [--frequency F] [--strategy SPEC]... [--threads N,...] [--load N,...] [--realtime-priority P]
+//         [--csv FILE] [--quiet]
 // SPEC is STRATEGY[:ITERATIONS[:TOLERANCE]]: the solver.strategy, the Newton iterations allowed
 // per frame (solver.max_iterations) and the residual tolerance (solver.tolerance; 0 means "always
-// do ITERATIONS"). One CSV row per strategy on standard output (or --csv), progress on stderr.
-// Pin it (taskset -c 0) for timings.
+// do ITERATIONS"). Each strategy runs once per thread count of --threads (solver.threads,
+// default 1) and, for each, once per count of --load: that many threads that keep processors
+// busy while the frames are timed, one per processor the process may use, in turn (a build or
+// another program on the same computer; default 0). --realtime-priority runs the timed frames
+// (and the model's helpers) under SCHED_FIFO, the load at normal priority. One CSV row per run on
+// standard output (or --csv), progress on stderr. Pin it (taskset) for timings.
+#include <pthread.h>
+#include <sched.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
@@ -20,9 +29,11 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "liver_sim/liver_model.h"
+#include "liver_sim/worker_pool.h"
 
 namespace {
 
@@ -32,8 +43,11 @@ using liver_sim::StepResult;
 
 const char* kUsage =
     "usage: bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]\n"
-    "             [--frequency HZ] [--strategy STRATEGY[:ITERATIONS[:TOLERANCE]]]... [--csv FILE] [--quiet]\n"
-    "  strategies: newton_krylov, full_newton, full_newton_eigen, reused_factor_cg, cg, modified_newton\n";
+    "             [--frequency HZ] [--strategy STRATEGY[:ITERATIONS[:TOLERANCE]]]... [--threads N,...]\n"
+    "             [--load N,...] [--realtime-priority P] [--csv FILE] [--quiet]\n"
+    "  strategies: newton_krylov, full_newton, full_newton_eigen, reused_factor_cg, cg, modified_newton\n"
+    "  --threads   solver.threads of the runs (default 1); --load: busy threads beside them (default 0)\n"
+    "  --realtime-priority  SCHED_FIFO priority (1-99) of the timed runs' threads (default 0: normal)\n";
 
 struct Spec {
   std::string text, strategy;
@@ -66,7 +80,56 @@ struct Loading {
   int frames = 100;
   double amplitude = 0.5, frequency = 1.0;  // -, Hz
   std::vector<liver_sim::InstrumentOptions> instruments;  // added to the scene's
+  int realtime_priority = 0;  // of the timed runs' threads (SCHED_FIFO), 0: normal scheduling
 };
+
+// Threads that keep processors busy while frames are timed, as a compiler or another program
+// would: thread i spins on the i-th processor this process may use (in turn).
+class CompetingLoad {
+ public:
+  explicit CompetingLoad(int threads) {
+    cpu_set_t allowed;
+    CPU_ZERO(&allowed);
+    sched_getaffinity(0, sizeof allowed, &allowed);
+    std::vector<int> cpus;
+    for (int c = 0; c < CPU_SETSIZE; ++c)
+      if (CPU_ISSET(c, &allowed)) cpus.push_back(c);
+    for (int i = 0; i < threads; ++i)
+      threads_.emplace_back([this, cpu = cpus[i % cpus.size()]] {
+        cpu_set_t one;
+        CPU_ZERO(&one);
+        CPU_SET(cpu, &one);
+        pthread_setaffinity_np(pthread_self(), sizeof one, &one);
+        liver_sim::set_realtime_priority(0);  // the competitor is an ordinary program
+        double x = 1;
+        while (!stop_.load(std::memory_order_relaxed)) x = std::sqrt(x + 1);
+        sink_ = x;
+      });
+  }
+  ~CompetingLoad() {
+    stop_ = true;
+    for (std::thread& t : threads_) t.join();
+  }
+
+ private:
+  std::vector<std::thread> threads_;
+  std::atomic<bool> stop_{false};
+  std::atomic<double> sink_{0};  // keeps the busy loop's work
+};
+
+std::vector<int> parse_counts(const std::string& s) {
+  std::vector<int> counts;
+  std::stringstream in(s);
+  std::string part;
+  while (std::getline(in, part, ',')) {
+    size_t used = 0;
+    const int n = std::stoi(part, &used);
+    if (used != part.size() || n < 0) throw std::invalid_argument("expected counts >= 0 separated by commas: " + s);
+    counts.push_back(n);
+  }
+  if (counts.empty()) throw std::invalid_argument("expected counts >= 0 separated by commas: " + s);
+  return counts;
+}
 
 // The scene's static equilibrium, to a residual of 1e-10.
 Eigen::VectorXd equilibrium(const std::string& scene_path, std::vector<std::string> overrides) {
@@ -80,9 +143,11 @@ Eigen::VectorXd equilibrium(const std::string& scene_path, std::vector<std::stri
   return model.positions();
 }
 
+// The frames of one strategy on `threads` threads, beside `load` busy threads.
 Run run(const std::string& scene_path, std::vector<std::string> overrides, const Spec& spec, const Loading& loading,
-        const Eigen::VectorXd& start, bool quiet) {
+        int threads, int load, const Eigen::VectorXd& start, bool quiet) {
   const int frames = loading.frames;
+  overrides.push_back("solver.threads=" + std::to_string(threads));
   overrides.push_back("solver.mode=dynamic");
   overrides.push_back("solver.strategy=" + spec.strategy);
   overrides.push_back("solver.max_iterations=" + std::to_string(spec.iterations));
@@ -91,11 +156,20 @@ Run run(const std::string& scene_path, std::vector<std::string> overrides, const
   overrides.push_back("solver.tolerance=" + tol.str());
   Scene scene = liver_sim::load_scene(scene_path, overrides);
   scene.instruments.insert(scene.instruments.end(), loading.instruments.begin(), loading.instruments.end());
+  // The model's helper threads inherit the scheduling of the thread that builds the model.
+  struct Priority {
+    explicit Priority(int p) {
+      const std::string refused = liver_sim::set_realtime_priority(p);
+      if (!refused.empty()) throw std::runtime_error("--realtime-priority " + std::to_string(p) + ": " + refused);
+    }
+    ~Priority() { liver_sim::set_realtime_priority(0); }
+  } priority(loading.realtime_priority);
   LiverModel model(liver_sim::load_scene_mesh(scene), scene);
   model.set_positions(start);
   Run r;
   r.tets = model.mesh().T.rows();
   r.dofs = 3 * model.mesh().V.rows();
+  CompetingLoad competing(load);
   for (int k = 0; k < frames; ++k) {
     const double t = (k + 1) * scene.solver.dt;
     model.set_load_scale(1 + loading.amplitude * std::sin(2 * M_PI * loading.frequency * t));
@@ -110,7 +184,8 @@ Run run(const std::string& scene_path, std::vector<std::string> overrides, const
     if (s.status == StepResult::Status::Diverged && r.diverged++ == 0) r.first_rollback = s.message;
   }
   if (!quiet)
-    std::cerr << "bench: " << spec.text << ": " << r.tets << " tetrahedra, " << frames << " frames, "
+    std::cerr << "bench: " << spec.text << ", " << threads << " threads, load " << load << ": " << r.tets
+              << " tetrahedra, " << frames << " frames, "
               << r.newton_iterations << " Newton iterations, " << r.factorizations << " factorisations";
   if (!quiet && r.diverged) std::cerr << ", " << r.diverged << " frames rolled back (first: " << r.first_rollback << ")";
   if (!quiet) std::cerr << "\n";
@@ -127,6 +202,7 @@ int main_checked(int argc, char** argv) {
   std::vector<std::string> overrides;
   std::vector<Spec> specs;
   Loading loading;
+  std::vector<int> thread_counts = {1}, loads = {0};
   bool quiet = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -138,6 +214,9 @@ int main_checked(int argc, char** argv) {
     else if (a == "--amplitude" && has_value) loading.amplitude = std::stod(argv[++i]);
     else if (a == "--frequency" && has_value) loading.frequency = std::stod(argv[++i]);
     else if (a == "--strategy" && has_value) specs.push_back(parse_spec(argv[++i]));
+    else if (a == "--threads" && has_value) thread_counts = parse_counts(argv[++i]);
+    else if (a == "--load" && has_value) loads = parse_counts(argv[++i]);
+    else if (a == "--realtime-priority" && has_value) loading.realtime_priority = std::stoi(argv[++i]);
     else if (a == "--csv" && has_value) csv = argv[++i];
     else if (a == "--quiet") quiet = true;
     else {
@@ -153,31 +232,33 @@ int main_checked(int argc, char** argv) {
   Spec reference_spec = parse_spec("newton_krylov:50:1e-10");
   reference_spec.text = "reference";
   const Eigen::VectorXd start = equilibrium(scene, overrides);
-  const Run reference = run(scene, overrides, reference_spec, loading, start, quiet);
+  const Run reference = run(scene, overrides, reference_spec, loading, thread_counts[0], 0, start, quiet);
   double peak = 0;  // errors are relative to the largest motion from the equilibrium in the reference run
   for (const Eigen::VectorXd& u : reference.displacement) peak = std::max(peak, u.cwiseAbs().maxCoeff());
 
   std::ofstream file;
   if (!csv.empty()) file.open(csv);
   std::ostream& out = csv.empty() ? std::cout : file;
-  out << "scene,tetrahedra,dofs,strategy,iterations,tolerance,frames,median_ms,mean_ms,p95_ms,fps,max_error,"
-         "final_error,newton_iterations,linear_iterations,factorizations,factorization_ms,diverged,contacts\n"
+  out << "scene,tetrahedra,dofs,strategy,iterations,tolerance,threads,load,frames,median_ms,mean_ms,p95_ms,fps,"
+         "max_error,final_error,newton_iterations,linear_iterations,factorizations,factorization_ms,diverged,contacts\n"
       << std::setprecision(6);
-  for (const Spec& spec : specs) {
-    const Run r = run(scene, overrides, spec, loading, start, quiet);
-    double max_error = 0;
-    for (int k = 0; k < frames; ++k)
-      max_error = std::max(max_error, (r.displacement[k] - reference.displacement[k]).cwiseAbs().maxCoeff());
-    const double final_error = (r.displacement.back() - reference.displacement.back()).cwiseAbs().maxCoeff();
-    double mean = 0;
-    for (double t : r.frame_ms) mean += t / frames;
-    out << scene << ',' << r.tets << ',' << r.dofs << ',' << spec.strategy << ',' << spec.iterations << ','
-        << spec.tolerance << ',' << frames << ',' << percentile(r.frame_ms, 0.5) << ',' << mean << ','
-        << percentile(r.frame_ms, 0.95) << ',' << 1000.0 / mean << ',' << max_error / peak << ','
-        << final_error / peak << ',' << r.newton_iterations << ',' << r.linear_iterations << ','
-        << r.factorizations << ',' << (r.factorizations ? r.factorization_ms / r.factorizations : 0.0) << ','
-        << r.diverged << ',' << static_cast<double>(r.contacts) / frames << '\n';
-  }
+  for (const Spec& spec : specs)
+    for (int threads : thread_counts)
+      for (int load : loads) {
+        const Run r = run(scene, overrides, spec, loading, threads, load, start, quiet);
+        double max_error = 0;
+        for (int k = 0; k < frames; ++k)
+          max_error = std::max(max_error, (r.displacement[k] - reference.displacement[k]).cwiseAbs().maxCoeff());
+        const double final_error = (r.displacement.back() - reference.displacement.back()).cwiseAbs().maxCoeff();
+        double mean = 0;
+        for (double t : r.frame_ms) mean += t / frames;
+        out << scene << ',' << r.tets << ',' << r.dofs << ',' << spec.strategy << ',' << spec.iterations << ','
+            << spec.tolerance << ',' << threads << ',' << load << ',' << frames << ',' << percentile(r.frame_ms, 0.5)
+            << ',' << mean << ',' << percentile(r.frame_ms, 0.95) << ',' << 1000.0 / mean << ',' << max_error / peak
+            << ',' << final_error / peak << ',' << r.newton_iterations << ',' << r.linear_iterations << ','
+            << r.factorizations << ',' << (r.factorizations ? r.factorization_ms / r.factorizations : 0.0) << ','
+            << r.diverged << ',' << static_cast<double>(r.contacts) / frames << '\n' << std::flush;
+      }
   return 0;
 }
 

@@ -1,5 +1,5 @@
 // Command-line simulator: runs a scene file and prints one JSON object on standard output.
-//   simulate --scene FILE [--set dotted.key=value]... [--vtu FILE] [--csv FILE] [--quiet]
+//   simulate --scene FILE [--set dotted.key=value]... [--threads N] [--vtu FILE] [--csv FILE] [--quiet]
 // Progress goes to standard error. Exit status: 0 done, 1 bad input (one line naming the file
 // or key), 2 bad command line, 3 a step diverged (the JSON says which).
 #include <algorithm>
@@ -25,9 +25,10 @@ using liver_sim::LiverModel;
 using liver_sim::StepResult;
 
 const char* kUsage =
-    "usage: simulate --scene FILE [--set dotted.key=value]... [--vtu FILE] [--csv FILE] [--quiet]\n"
+    "usage: simulate --scene FILE [--set dotted.key=value]... [--threads N] [--vtu FILE] [--csv FILE] [--quiet]\n"
     "  --scene FILE   YAML scene (see README, 'Scene format')\n"
     "  --set K=V      override a scalar of the scene, e.g. --set capsule.enabled=false\n"
+    "  --threads N    threads of the element loops (solver.threads, default 1; results do not change)\n"
     "  --vtu FILE     write the final mesh with its displacement field (VTK XML)\n"
     "  --csv FILE     write the probe displacements after every step\n"
     "  --quiet        no progress on standard error\n";
@@ -52,6 +53,10 @@ bool parse_args(int argc, char** argv, Options* o) {
     if (a == "--csv" && value(&o->csv)) continue;
     if (a == "--set" && value(&v)) {
       o->overrides.push_back(v);
+      continue;
+    }
+    if (a == "--threads" && value(&v)) {
+      o->overrides.push_back("solver.threads=" + v);
       continue;
     }
     if (a == "--quiet") {
