@@ -25,9 +25,9 @@ STRATEGY = "modified_newton:1:0"
 # label, scene, --set, instruments, frames
 CASES = [
     ("cube", "aspiration_cube.yaml", ["solver.dt=0.001"], None, 300),
-    ("cube, probe", "probe_cube.yaml", [], "probe_sweep_cube.yaml", 300),
+    ("cube probe", "probe_cube.yaml", [], "probe_sweep_cube.yaml", 300),
     ("phantom", "liver_phantom.yaml", ["solver.dt=0.01"], None, 60),
-    ("phantom, probe", "liver_phantom.yaml", ["solver.dt=0.01"], "probe_sweep_phantom.yaml", 60),
+    ("phantom probe", "liver_phantom.yaml", ["solver.dt=0.01"], "probe_sweep_phantom.yaml", 60),
 ]
 
 
