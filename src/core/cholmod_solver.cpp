@@ -11,8 +11,7 @@ namespace {
 
 // CHOLMOD on the calling thread, process-wide (both settings belong to the process):
 // - its own OpenMP loops (copies into the supernodes) ask for 4 threads whatever the machine,
-//   and on two vCPUs their waits cost more than their work: a phantom factorisation took 70-75
-//   ms against 44 on one thread, 147-152 against 92-99 ms beside a busy thread per core
+//   and their barriers wait for any thread the system holds up, as the element loops' did
 //   (doc/performance.md#threads-on-a-shared-computer). With no active OpenMP level allowed,
 //   every OpenMP region of the process runs on the thread that meets it;
 // - OpenBLAS (its dense blocks) keeps a thread pool of its own whose split of a block changes
