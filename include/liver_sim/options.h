@@ -165,7 +165,7 @@ struct RegistrationOptions {
   // registration holds at their rest position when the clouds call for it (registration.h).
   std::vector<Region> candidate_supports;
   double support_stiffness = 1e3;  // N/m, > 0: per surface node of a held candidate
-  double support_gain = 0.15;      // -, in (0, 1): share of the cloud springs' energy a candidate must remove
+  double support_gain = 0.15;      // -, in (0, 1): share of the cloud springs' patch pull a candidate must remove
   UncertaintyOptions uncertainty;
 };
 
