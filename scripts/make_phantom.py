@@ -43,7 +43,7 @@ def inside_phantom(p, margin=MARGIN):
     return False
 
 
-def make_mesh(path):
+def make_mesh(path, size=MESH_SIZE):
     gmsh.initialize()
     gmsh.option.setNumber("General.Terminal", 0)
     gmsh.option.setNumber("General.NumThreads", 1)
@@ -58,8 +58,8 @@ def make_mesh(path):
     cut_box = occ.addBox(-0.3, -0.3, -0.3, 0.6, 0.6, 0.3 + Z_CUT)
     occ.cut(fused, [(3, cut_box)])
     occ.synchronize()
-    gmsh.option.setNumber("Mesh.MeshSizeMax", MESH_SIZE)
-    gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * MESH_SIZE)
+    gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+    gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * size)
     gmsh.option.setNumber("Mesh.Algorithm3D", 1)
     gmsh.option.setNumber("Mesh.Optimize", 1)
     gmsh.option.setNumber("Mesh.RandomSeed", 1)

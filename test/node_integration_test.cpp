@@ -209,19 +209,36 @@ TEST_F(Node, MalformedInputIsRefusedAndCountedWhileTheNodeRuns) {
   ASSERT_TRUE(refused(4)) << "truncated cloud: " << status_.text;
   EXPECT_NEAR(status_.max_displacement, before.max_displacement, 1e-12) << "refused input changed the model";
   EXPECT_EQ(status_.clouds_registered, before.clouds_registered);
-  // A valid cloud is registered and not counted as refused.
+  // Ten points on a line are too few to act (registration.min_points): refused.
+  sensor_msgs::PointCloud2 line;
+  line.header.frame_id = "liver";
+  sensor_msgs::PointCloud2Modifier line_mod(line);
+  line_mod.setPointCloud2FieldsByString(1, "xyz");
+  line_mod.resize(10);
+  sensor_msgs::PointCloud2Iterator<float> lx(line, "x");
+  for (int i = 0; i < 10; ++i, ++lx) lx[0] = lx[1] = lx[2] = 0.001f * i;
+  cloud_pub_.publish(line);
+  ASSERT_TRUE(refused(5)) << "ten points: " << status_.text;
+  EXPECT_NE(status_.text.find("min_points"), std::string::npos) << status_.text;
+  EXPECT_EQ(status_.clouds_registered, before.clouds_registered);
+  // A cloud of the cube's top face (a sixth of its surface, 100 points 1.5 mm apart) is
+  // registered and not counted as refused.
   sensor_msgs::PointCloud2 cloud;
   cloud.header.frame_id = "liver";
   sensor_msgs::PointCloud2Modifier mod(cloud);
   mod.setPointCloud2FieldsByString(1, "xyz");
-  mod.resize(10);
+  mod.resize(100);
   sensor_msgs::PointCloud2Iterator<float> x(cloud, "x");
-  for (int i = 0; i < 10; ++i, ++x) x[0] = x[1] = x[2] = 0.001f * i;
+  for (int i = 0; i < 100; ++i, ++x) {
+    x[0] = 0.00075f + 0.0015f * (i % 10);
+    x[1] = 0.00075f + 0.0015f * (i / 10);
+    x[2] = 0.0151f;
+  }
   cloud_pub_.publish(cloud);
   ASSERT_TRUE(wait_for([&] { return status_.clouds_registered == before.clouds_registered + 1; }, 10.0)) << status_.text;
   const unsigned count = status_count_;
   ASSERT_TRUE(wait_for([&] { return status_count_ > count + 5; }, 10.0)) << "status stopped flowing";
-  EXPECT_EQ(status_.rejected_inputs, before.rejected_inputs + 4);
+  EXPECT_EQ(status_.rejected_inputs, before.rejected_inputs + 5);
 }
 
 }  // namespace

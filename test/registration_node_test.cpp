@@ -2,8 +2,8 @@
 // phantom, rendered here by the core and sent in a camera frame known only through tf2 (and
 // known 3 mm and 1 degree wrong, which ~align_rigidly corrects on a first cloud of the
 // unlifted liver), bring the node's tracked targets to where the lift put them; a 1M-point cloud
-// is downsampled and registered; empty, NaN-filled and unknown-frame clouds are refused,
-// counted, and change nothing.
+// is downsampled and registered; empty, NaN-filled, unknown-frame and too small clouds are
+// refused, counted, and change nothing; the targets' covariances and ellipsoids follow.
 #include <geometry_msgs/PoseArray.h>
 #include <gtest/gtest.h>
 #include <pcl_conversions/pcl_conversions.h>
@@ -13,9 +13,11 @@
 #include <tf2_ros/static_transform_broadcaster.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <Eigen/Eigenvalues>
 #include <cmath>
 
 #include "liver_sim/SimulationStatus.h"
+#include "liver_sim/TargetCovariances.h"
 #include "liver_sim/registration.h"
 #include "scenarios.h"
 #include "wait_for.h"
@@ -26,8 +28,9 @@ using liver_sim_test::wait_for;
 
 liver_sim::SimulationStatus status;
 geometry_msgs::PoseArray target_poses;
-visualization_msgs::MarkerArray target_markers;
-int status_count = 0, pose_count = 0, marker_count = 0;
+visualization_msgs::MarkerArray target_markers, ellipsoids;
+liver_sim::TargetCovariances covariances;
+int status_count = 0, pose_count = 0, marker_count = 0, covariance_count = 0, ellipsoid_count = 0;
 
 // The camera in the model frame: at the synthetic view's eye, turned 90 degrees about x, so
 // that camera and model coordinates differ by a rotation and a translation.
@@ -64,6 +67,12 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
   auto s3 = nh.subscribe<visualization_msgs::MarkerArray>(
       "liver_sim/targets", 2,
       boost::function<void(const visualization_msgs::MarkerArray::ConstPtr&)>([](const auto& m) { target_markers = *m, ++marker_count; }));
+  auto s4 = nh.subscribe<liver_sim::TargetCovariances>(
+      "liver_sim/target_covariances", 2,
+      boost::function<void(const liver_sim::TargetCovariances::ConstPtr&)>([](const auto& m) { covariances = *m, ++covariance_count; }));
+  auto s5 = nh.subscribe<visualization_msgs::MarkerArray>(
+      "liver_sim/target_ellipsoids", 2,
+      boost::function<void(const visualization_msgs::MarkerArray::ConstPtr&)>([](const auto& m) { ellipsoids = *m, ++ellipsoid_count; }));
   ros::Publisher cloud_pub = nh.advertise<sensor_msgs::PointCloud2>("points", 1);
 
   // Ground truth: the node's scene solved here, then lifted by 5 N under the right lobe.
@@ -123,8 +132,15 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
   cloud_pub.publish(to_message(seen, camera, "nowhere"));
   ASSERT_TRUE(wait_for([&] { return status.rejected_inputs == rejected + 3; }, 10.0)) << status.text;
   EXPECT_NE(status.text.find("nowhere"), std::string::npos) << status.text;
+  // Too few points to act (registration.min_points): refused, not a spike.
+  pcl::PointCloud<pcl::PointXYZ> few;
+  for (int i = 0; i < scene.registration.min_points / 2; ++i) few.push_back(seen[i * seen.size() / scene.registration.min_points]);
+  cloud_pub.publish(to_message(few, camera, "camera"));
+  ASSERT_TRUE(wait_for([&] { return status.rejected_inputs == rejected + 4; }, 10.0)) << status.text;
+  EXPECT_NE(status.text.find("min_points"), std::string::npos) << status.text;
   EXPECT_EQ(status.clouds_registered, 0u);
   EXPECT_EQ(status.max_displacement, displacement);
+  EXPECT_EQ(covariance_count, 0);  // no registration, no uncertainty analysis
 
   // The rigid alignment, asked for by service, on a cloud of the liver before the lift.
   ros::ServiceClient align = nh.serviceClient<std_srvs::Trigger>("liver_sim/align_rigidly");
@@ -154,7 +170,7 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
       << status.state << " " << status.text;
   pose_count = 0;
   ASSERT_TRUE(wait_for([&] { return pose_count > 0; }, 10.0));
-  EXPECT_EQ(status.rejected_inputs, rejected + 3);
+  EXPECT_EQ(status.rejected_inputs, rejected + 4);
   EXPECT_LT(status.registration_rms, 1.5e-3);  // the clouds' 1 mm noise, with the voxel grid's averaging
 
   double unregistered = 0, mean = 0, worst = 0;
@@ -168,6 +184,23 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
   // As the core's test: a fraction of the motion, and within 2 mm everywhere.
   EXPECT_LT(mean, 0.15 * unregistered) << "unregistered " << unregistered;
   EXPECT_LT(worst, 2e-3);
+
+  // The targets' uncertainty: every target, in the order of ~target_poses, with a symmetric
+  // positive semi-definite position block (m^2) and its 95% ellipsoid.
+  ASSERT_TRUE(wait_for([&] { return covariance_count > 0 && ellipsoid_count > 0; }, 10.0));
+  ASSERT_EQ(covariances.names.size(), expected.size());
+  ASSERT_EQ(covariances.poses.size(), expected.size());
+  ASSERT_EQ(ellipsoids.markers.size(), expected.size());
+  EXPECT_GT(status.target_radius_95, 0.0);
+  for (size_t i = 0; i < expected.size(); ++i) {
+    EXPECT_EQ(covariances.names[i], expected[i].name);
+    Eigen::Matrix3d c;
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) c(a, b) = covariances.poses[i].covariance[6 * a + b];
+    EXPECT_LT((c - c.transpose()).norm(), 1e-12 * c.norm()) << expected[i].name;
+    EXPECT_GE(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(c).eigenvalues().minCoeff(), -1e-12 * c.norm()) << expected[i].name;
+    EXPECT_GT(c.trace(), 0.0) << expected[i].name;
+  }
 }
 
 }  // namespace

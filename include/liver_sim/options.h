@@ -135,6 +135,13 @@ struct ContactOptions {
   int max_iterations = 1000;        // Gauss-Seidel sweeps per contact solve
 };
 
+// How far to trust the registered targets (target_uncertainty.h): what the model does not know.
+struct UncertaintyOptions {
+  double patch_spacing = 0.03;     // m, > 0: distance between the centres of the unknown force patches
+  double force_ratio = 1.0;        // -, >= 0: unknown force per patch over the springs' typical force per patch
+  double stiffness_log_sd = 0.35;  // -, >= 0: standard deviation of the log of the tissue's stiffness factor
+};
+
 // Non-rigid registration to intra-operative point clouds (registration.h). The cloud pulls the
 // boundary through springs between each accepted point and its closest point on the surface.
 struct RegistrationOptions {
@@ -153,6 +160,17 @@ struct RegistrationOptions {
   int newton_iterations = 1;       // per update (a real-time frame: the next cloud continues)
   SolverOptions::Strategy strategy = SolverOptions::Strategy::ModifiedNewton;  // of those iterations
   bool rigid_alignment = false;    // PCL ICP of the first cloud to the surface, applied to all clouds
+  // What a cloud must show before it acts, and how hard it may pull (registration.h).
+  int min_points = 50;             // accepted points, >= 1: fewer and the cloud is refused
+  double min_coverage = 0.02;      // -, in [0, 1]: share of the boundary area the accepted points cover
+  double full_coverage = 0.2;      // -, in (0, 1]: the springs' total is `stiffness` from this coverage
+                                   // on, and falls in proportion below it
+  // Attachments the segmentation may not show (a ligament): regions of the surface the
+  // registration holds at their rest position when the clouds call for it (registration.h).
+  std::vector<Region> candidate_supports;
+  double support_stiffness = 1e3;  // N/m, > 0: per surface node of a held candidate
+  double support_gain = 0.15;      // -, in (0, 1): share of the cloud springs' patch pull a candidate must remove
+  UncertaintyOptions uncertainty;
 };
 
 // Empty string when valid, else a message naming the field at fault.

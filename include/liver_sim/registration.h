@@ -23,6 +23,8 @@
 
 #include "liver_sim/closest_points.h"
 #include "liver_sim/liver_model.h"
+#include "liver_sim/state_compliance.h"
+#include "liver_sim/surface_patches.h"
 
 namespace liver_sim {
 
@@ -82,8 +84,14 @@ struct RegistrationFrame {
   int input_points = 0;      // finite points received
   int used_points = 0;       // after cropping, voxel grid and stride
   int correspondences = 0;   // accepted (not gated, not trimmed) at the last update
+  double inlier_fraction = 0;  // correspondences / used_points
+  double coverage = 0;       // share of the boundary area on triangles that hold an accepted point
+  double stiffness_scale = 0;  // the springs' total over options.stiffness: min(1, coverage / full_coverage)
   double rms = 0;            // m: the accepted points' spring lengths after the solve (along the
                              // normal for point-to-plane): their distance to the surface
+  double rms_all = 0;        // m: every used point's distance to the surface after the solve, those
+                             // beyond max_distance counted at max_distance (outliers and trimmed
+                             // points included: it cannot look better than the cloud fits)
   StepResult step;           // the last solve (its status: converged, capped or rolled back)
   int newton_iterations = 0; // over all updates of this frame
   int factorizations = 0;    // CHOLMOD factorisations, over all updates
@@ -92,14 +100,17 @@ struct RegistrationFrame {
 
 class SurfaceRegistration {
  public:
-  // Throws std::invalid_argument for invalid options (validate(RegistrationOptions)).
+  // Throws std::invalid_argument for invalid options (validate(RegistrationOptions)) and for a
+  // candidate support that selects no free surface node of the rest shape.
   SurfaceRegistration(LiverModel& model, const RegistrationOptions& options);
 
   // Registers the model to a cloud in the model frame (m), seen from `viewpoint` (the sensor's
   // origin in the model frame) when known: then only triangles facing it correspond. Non-finite
   // points are dropped. Throws std::invalid_argument, with nothing changed, when no finite point
-  // remains, none lies within max_distance of the model's bounding box or of its surface, or no
-  // triangle faces the viewpoint.
+  // remains, none lies within max_distance of the model's bounding box or of its surface, no
+  // triangle faces the viewpoint, fewer than min_points are accepted, or they cover less than
+  // min_coverage of the surface. The springs share stiffness x min(1, coverage / full_coverage):
+  // a small patch pulls no harder per area than a full view.
   RegistrationFrame register_cloud(const pcl::PointCloud<pcl::PointXYZ>& cloud,
                                    const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
 
@@ -113,7 +124,25 @@ class SurfaceRegistration {
   // options.rigid_alignment says: a camera moved or was recalibrated.
   void request_rigid_alignment() { align_requested_ = true; }
 
-  // Removes the springs (the model relaxes at its next step) and forgets the rigid alignment.
+  // Attachments the segmentation did not show. A candidate support (options.candidate_supports)
+  // is held, from the next cloud on, when holding it would take at least options.support_gain of
+  // the springs' systematic pull away: the surface the camera sees is free of forces in surgery
+  // (but for the instruments), so a net pull of the springs on a patch of it (a few cm, where
+  // the sensor's noise cancels) measures what the model gets wrong. Each candidate not held is
+  // tried linearised at the state `compliance` was factorised at (with the current springs): a
+  // reaction spread over its nodes holding their mean at rest, R = (Phi^T A^-1 Phi)^-1 Phi^T
+  // (X - x), moves the state by A^-1 Phi R, and the pull is evaluated there. The best one is held (at most one per call: the next call sees
+  // its effect); held candidates stay held until clear(). Returns the candidate newly held, or
+  // -1. Costs one solve with three columns per candidate.
+  int estimate_supports(StateCompliance& compliance);
+  // Per candidate: held, and the share of the springs' pull it took away when last tried.
+  const std::vector<bool>& supports_held() const { return held_; }
+  const std::vector<double>& support_gains() const { return gains_; }
+  // The springs of the cloud alone (the model's springs also hold the held supports).
+  const std::vector<SurfaceTarget>& cloud_springs() const { return cloud_springs_; }
+
+  // Removes the springs (the model relaxes at its next step), lets the supports go and forgets
+  // the rigid alignment.
   void clear();
   // The rigid alignment applied to every cloud (identity unless options.rigid_alignment).
   const Eigen::Isometry3d& alignment() const { return alignment_; }
@@ -125,11 +154,21 @@ class SurfaceRegistration {
   // prepare_cloud into points_: the alignment, the model's box grown by max_distance.
   int filter(const pcl::PointCloud<pcl::PointXYZ>& cloud);
   void align_rigidly();
-  // Correspondences at the model's current state into targets_ (the model is not touched);
-  // returns their number. The first update of a frame searches the tree; later ones, after the
-  // surface moved a little, test the triangles that search found near each point.
-  int find_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint);
+  // Correspondences at the model's current state into targets_ (the model is not touched), with
+  // the frame's inlier fraction, coverage and stiffness scale; returns their number. The first
+  // update of a frame searches the tree; later ones, after the surface moved a little, test the
+  // triangles that search found near each point.
+  int find_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint, RegistrationFrame& frame);
+  // Why the accepted points cannot act ("" when they can).
+  std::string unsupported(int accepted, double coverage) const;
   double spring_rms() const;
+  // The springs' systematic pull at positions x (N^2): the sum over the surface patches of their
+  // net spring force squared (the sensor's noise cancels within a patch, a model error does not).
+  double systematic_pull(const Eigen::VectorXd& x) const;
+  // The cloud's springs plus those of the held supports, to the model.
+  void apply_springs();
+  // RegistrationFrame::rms_all at the model's current state (the last update's candidates).
+  double all_points_rms();
   // One model step with the registration's strategy and iteration cap; adds to the frame.
   void solve(RegistrationFrame& frame);
 
@@ -144,6 +183,18 @@ class SurfaceRegistration {
   std::vector<SurfaceLocator::Hit> hits_;
   std::vector<std::vector<int>> candidates_;  // per point: the triangles its frame's search tested
   std::vector<std::pair<double, int>> ranked_;
+  std::vector<char> covered_;  // per boundary triangle: holds an accepted point
+  RegistrationFrame last_;     // of the last registered cloud (refine reports its support)
+  std::vector<SurfaceTarget> cloud_springs_;
+  struct Candidate {
+    std::vector<SurfaceTarget> springs;  // point-to-point, each surface node to its rest position
+    std::vector<int> nodes;
+    std::vector<double> weights;  // per node, by area, summing to 1
+  };
+  std::vector<Candidate> supports_;
+  SurfacePatches patches_;  // where the springs' pull is gathered (only with candidates)
+  std::vector<bool> held_;
+  std::vector<double> gains_;
 };
 
 }  // namespace liver_sim

@@ -112,6 +112,14 @@ std::string validate(const ContactOptions& o) {
                       o.max_iterations >= 1 ? "" : message("contact.max_iterations", ">= 1", o.max_iterations)});
 }
 
+static std::string candidate_error(const std::vector<Region>& regions) {
+  for (size_t i = 0; i < regions.size(); ++i) {
+    const std::string error = validate(regions[i]);
+    if (!error.empty()) return "registration.candidate_supports." + std::to_string(i) + ": " + error;
+  }
+  return "";
+}
+
 std::string validate(const RegistrationOptions& o) {
   return first_error(
       {positive("registration.stiffness", o.stiffness), non_negative("registration.voxel_size", o.voxel_size),
@@ -122,7 +130,15 @@ std::string validate(const RegistrationOptions& o) {
            : message("registration.trim_fraction", "in [0, 0.9)", o.trim_fraction),
        positive("registration.huber_width", o.huber_width),
        o.correspondence_updates >= 1 ? "" : message("registration.correspondence_updates", ">= 1", o.correspondence_updates),
-       o.newton_iterations >= 1 ? "" : message("registration.newton_iterations", ">= 1", o.newton_iterations)});
+       o.newton_iterations >= 1 ? "" : message("registration.newton_iterations", ">= 1", o.newton_iterations),
+       o.min_points >= 1 ? "" : message("registration.min_points", ">= 1", o.min_points),
+       o.min_coverage >= 0 && o.min_coverage <= 1 ? "" : message("registration.min_coverage", "in [0, 1]", o.min_coverage),
+       o.full_coverage > 0 && o.full_coverage <= 1 ? "" : message("registration.full_coverage", "in (0, 1]", o.full_coverage),
+       candidate_error(o.candidate_supports), positive("registration.support_stiffness", o.support_stiffness),
+       o.support_gain > 0 && o.support_gain < 1 ? "" : message("registration.support_gain", "in (0, 1)", o.support_gain),
+       positive("registration.uncertainty.patch_spacing", o.uncertainty.patch_spacing),
+       non_negative("registration.uncertainty.force_ratio", o.uncertainty.force_ratio),
+       non_negative("registration.uncertainty.stiffness_log_sd", o.uncertainty.stiffness_log_sd)});
 }
 
 std::string validate(const Region& r) {

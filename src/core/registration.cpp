@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 
 namespace liver_sim {
@@ -109,10 +110,96 @@ SurfaceRegistration::SurfaceRegistration(LiverModel& model, const RegistrationOp
       previous_points_(new pcl::PointCloud<pcl::PointXYZ>) {
   const std::string error = validate(options);
   if (!error.empty()) throw std::invalid_argument(error);
+  // Each candidate's free surface nodes, with a spring on a boundary triangle at each.
+  const MechanicalModel& m = model.mechanics();
+  const Eigen::VectorXd& X = m.rest_positions();
+  const Eigen::MatrixX3i& F = m.boundary();
+  std::vector<int> corner_triangle(X.size() / 3, -1), corner_slot(X.size() / 3, -1);
+  Eigen::VectorXd area = Eigen::VectorXd::Zero(X.size() / 3);
+  for (int t = 0; t < F.rows(); ++t) {
+    const double a = 0.5 * (node(X, F(t, 1)) - node(X, F(t, 0))).cross(node(X, F(t, 2)) - node(X, F(t, 0))).norm();
+    for (int j = 0; j < 3; ++j) {
+      corner_triangle[F(t, j)] = t, corner_slot[F(t, j)] = j;
+      area[F(t, j)] += a / 3;
+    }
+  }
+  for (size_t c = 0; c < options.candidate_supports.size(); ++c) {
+    Candidate candidate;
+    double total = 0;
+    for (int n : m.boundary_nodes()) {
+      if (m.fixed_dofs()[3 * n] || !options.candidate_supports[c].contains(node(X, n))) continue;
+      SurfaceTarget spring;
+      spring.triangle = corner_triangle[n];
+      spring.weights[corner_slot[n]] = 1.0;
+      spring.point = node(X, n);
+      spring.stiffness = options.support_stiffness;
+      candidate.springs.push_back(spring);
+      candidate.nodes.push_back(n);
+      candidate.weights.push_back(area[n]);
+      total += area[n];
+    }
+    if (candidate.nodes.empty())
+      throw std::invalid_argument("registration.candidate_supports." + std::to_string(c) + ": the region selects no free surface node");
+    for (double& w : candidate.weights) w /= total;
+    supports_.push_back(std::move(candidate));
+  }
+  held_.assign(supports_.size(), false);
+  gains_.assign(supports_.size(), 0.0);
+  if (!supports_.empty()) patches_ = make_surface_patches(model.mechanics(), options.uncertainty.patch_spacing);
+}
+
+void SurfaceRegistration::apply_springs() {
+  std::vector<SurfaceTarget> springs = cloud_springs_;
+  for (size_t c = 0; c < supports_.size(); ++c)
+    if (held_[c]) springs.insert(springs.end(), supports_[c].springs.begin(), supports_[c].springs.end());
+  model_.set_surface_targets(std::move(springs));
+}
+
+double SurfaceRegistration::systematic_pull(const Eigen::VectorXd& x) const {
+  double sum = 0;
+  for (const Eigen::Vector3d& f : patch_spring_forces(patches_, model_.boundary(), cloud_springs_, x)) sum += f.squaredNorm();
+  return sum;
+}
+
+int SurfaceRegistration::estimate_supports(StateCompliance& compliance) {
+  std::vector<int> tried;
+  for (size_t c = 0; c < supports_.size(); ++c)
+    if (!held_[c]) tried.push_back(static_cast<int>(c));
+  if (tried.empty()) return -1;
+  const Eigen::VectorXd& x = compliance.state();
+  const double before = systematic_pull(x);
+  if (!(before > 0)) return -1;
+  // Phi: per candidate, unit forces in x, y, z spread over its nodes; U = A^-1 Phi.
+  Eigen::MatrixXd Phi = Eigen::MatrixXd::Zero(x.size(), 3 * tried.size()), U;
+  for (size_t k = 0; k < tried.size(); ++k) {
+    const Candidate& c = supports_[tried[k]];
+    for (size_t i = 0; i < c.nodes.size(); ++i)
+      for (int a = 0; a < 3; ++a) Phi(3 * c.nodes[i] + a, 3 * k + a) = c.weights[i];
+  }
+  compliance.solve(Phi, U);
+  const Eigen::VectorXd& X = model_.mechanics().rest_positions();
+  int best = -1;
+  for (size_t k = 0; k < tried.size(); ++k) {
+    const auto phi = Phi.middleCols(3 * k, 3), u = U.middleCols(3 * k, 3);
+    const Eigen::Matrix3d M = phi.transpose() * u;
+    const Eigen::Vector3d R = M.ldlt().solve(phi.transpose() * (X - x));
+    const double gain = 1.0 - systematic_pull(x + u * R) / before;
+    gains_[tried[k]] = gain;
+    if (gain >= options_.support_gain && (best < 0 || gain > gains_[best])) best = tried[k];
+  }
+  if (best >= 0) {
+    held_[best] = true;
+    apply_springs();
+  }
+  return best;
 }
 
 void SurfaceRegistration::clear() {
   model_.set_surface_targets({});
+  cloud_springs_.clear();
+  held_.assign(supports_.size(), false);
+  gains_.assign(supports_.size(), 0.0);
+  last_ = RegistrationFrame();
   alignment_ = Eigen::Isometry3d::Identity();
   aligned_ = false;
   points_->clear();
@@ -204,7 +291,8 @@ void SurfaceRegistration::align_rigidly() {
   align_requested_ = false;
 }
 
-int SurfaceRegistration::find_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint) {
+int SurfaceRegistration::find_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint,
+                                              RegistrationFrame& frame) {
   const int n = static_cast<int>(points_->size());
   hits_.resize(n);
   if (search) {
@@ -225,6 +313,20 @@ int SurfaceRegistration::find_correspondences(bool search, const std::optional<E
   // Trimmed: the farthest share of the gated points goes too (outliers near the surface).
   std::sort(ranked_.begin(), ranked_.end());
   ranked_.resize(ranked_.size() - static_cast<size_t>(options_.trim_fraction * ranked_.size()));
+  // Coverage: the area of the triangles that hold an accepted point, of the whole boundary.
+  const Eigen::VectorXd& x = model_.positions();
+  const Eigen::MatrixX3i& F = model_.boundary();
+  covered_.assign(F.rows(), 0);
+  for (const auto& [d, i] : ranked_) covered_[hits_[i].triangle] = 1;
+  double area = 0, covered_area = 0;
+  for (int t = 0; t < F.rows(); ++t) {
+    const double a = 0.5 * (node(x, F(t, 1)) - node(x, F(t, 0))).cross(node(x, F(t, 2)) - node(x, F(t, 0))).norm();
+    area += a;
+    if (covered_[t]) covered_area += a;
+  }
+  frame.coverage = covered_area / area;
+  frame.inlier_fraction = n > 0 ? static_cast<double>(ranked_.size()) / n : 0.0;
+  frame.stiffness_scale = std::min(1.0, frame.coverage / options_.full_coverage);
   auto huber = [&](double d) { return d <= options_.huber_width ? 1.0 : options_.huber_width / d; };
   double total_weight = 0;
   for (const auto& [d, i] : ranked_) total_weight += huber(d);
@@ -237,14 +339,37 @@ int SurfaceRegistration::find_correspondences(bool search, const std::optional<E
     const pcl::PointXYZ& q = (*points_)[i];
     t.point = Eigen::Vector3d(q.x, q.y, q.z);
     if (options_.metric == RegistrationOptions::Metric::PointToPlane) t.normal = h.normal;
-    t.stiffness = options_.stiffness * huber(d) / total_weight;
+    t.stiffness = options_.stiffness * frame.stiffness_scale * huber(d) / total_weight;
     targets_.push_back(t);
   }
   return static_cast<int>(targets_.size());
 }
 
+std::string SurfaceRegistration::unsupported(int accepted, double coverage) const {
+  std::ostringstream why;
+  if (accepted < options_.min_points)
+    why << accepted << " points correspond to the surface (registration.min_points: " << options_.min_points << ")";
+  else if (coverage < options_.min_coverage)
+    why << "the points cover " << 100 * coverage << "% of the surface (registration.min_coverage: "
+        << 100 * options_.min_coverage << "%)";
+  return why.str();
+}
+
+double SurfaceRegistration::all_points_rms() {
+  const int n = static_cast<int>(points_->size());
+  if (n == 0 || static_cast<int>(candidates_.size()) != n) return 0.0;
+  locator_.refresh(model_.positions(), model_.boundary());
+  double sum = 0;
+  for (int i = 0; i < n; ++i) {
+    const pcl::PointXYZ& q = (*points_)[i];
+    const double d = locator_.closest_among(Eigen::Vector3d(q.x, q.y, q.z), candidates_[i]).distance;
+    sum += std::pow(std::min(d, options_.max_distance), 2);
+  }
+  return std::sqrt(sum / n);
+}
+
 double SurfaceRegistration::spring_rms() const {
-  const std::vector<SurfaceTarget>& targets = model_.surface_targets();
+  const std::vector<SurfaceTarget>& targets = cloud_springs_;
   if (targets.empty()) return 0.0;
   const Eigen::VectorXd& x = model_.positions();
   const Eigen::MatrixX3i& F = model_.boundary();
@@ -286,19 +411,30 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   const std::optional<Eigen::Vector3d> eye = viewpoint ? std::optional<Eigen::Vector3d>(alignment_ * *viewpoint) : viewpoint;
   for (int u = 0; u < options_.correspondence_updates; ++u) {
     const auto t0 = Clock::now();
-    const int found = find_correspondences(u == 0, eye);
+    const RegistrationFrame applied = frame;
+    const int found = find_correspondences(u == 0, eye, frame);
     frame.correspondence_ms += ms_since(t0);
     if (found == 0 && u == 0)
       refuse(locator_.empty() ? "no surface triangle faces the viewpoint (a sensor inside the liver?)"
                               : "no point of the cloud lies within max_distance of the surface");
-    if (found == 0) break;  // the surface moved away from every point: the last springs stay
+    const std::string why = unsupported(found, frame.coverage);
+    if (!why.empty() && u == 0) refuse(why);
+    if (!why.empty()) {  // the surface moved away from the points: the last springs stay
+      frame.coverage = applied.coverage;
+      frame.inlier_fraction = applied.inlier_fraction;
+      frame.stiffness_scale = applied.stiffness_scale;
+      break;
+    }
     frame.correspondences = found;
-    model_.set_surface_targets(std::move(targets_));  // refilled at the next update
+    cloud_springs_.swap(targets_);  // targets_ is refilled at the next update
+    apply_springs();
     solve(frame);
     if (frame.step.status == StepResult::Status::Diverged) break;
   }
   frame.rms = spring_rms();
+  frame.rms_all = all_points_rms();
   frame.total_ms = ms_since(t_frame);
+  last_ = frame;
   return frame;
 }
 
@@ -327,10 +463,15 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
 RegistrationFrame SurfaceRegistration::refine() {
   const auto t_frame = Clock::now();
   RegistrationFrame frame;
+  frame.input_points = last_.input_points;
   frame.used_points = static_cast<int>(points_->size());
-  frame.correspondences = static_cast<int>(model_.surface_targets().size());
+  frame.correspondences = static_cast<int>(cloud_springs_.size());
+  frame.inlier_fraction = last_.inlier_fraction;
+  frame.coverage = last_.coverage;
+  frame.stiffness_scale = last_.stiffness_scale;
   solve(frame);
   frame.rms = spring_rms();
+  frame.rms_all = all_points_rms();
   frame.total_ms = ms_since(t_frame);
   return frame;
 }

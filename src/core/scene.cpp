@@ -215,7 +215,8 @@ class Reader {
   void read_registration(const YAML::Node& g, RegistrationOptions& o) const {
     check_keys(g, "registration", {"stiffness", "metric", "voxel_size", "max_points", "max_distance", "trim_fraction",
                                    "huber_width", "correspondence_updates", "newton_iterations", "strategy",
-                                   "rigid_alignment"});
+                                   "rigid_alignment", "min_points", "min_coverage", "full_coverage",
+                                   "candidate_supports", "support_stiffness", "support_gain", "uncertainty"});
     if (g["strategy"]) o.strategy = strategy(g["strategy"], "registration.strategy");
     if (g["newton_iterations"]) o.newton_iterations = integer(g["newton_iterations"], "registration.newton_iterations");
     if (g["stiffness"]) o.stiffness = number(g["stiffness"], "registration.stiffness");
@@ -231,6 +232,23 @@ class Reader {
     if (g["correspondence_updates"])
       o.correspondence_updates = integer(g["correspondence_updates"], "registration.correspondence_updates");
     if (g["rigid_alignment"]) o.rigid_alignment = boolean(g["rigid_alignment"], "registration.rigid_alignment");
+    if (g["min_points"]) o.min_points = integer(g["min_points"], "registration.min_points");
+    if (g["min_coverage"]) o.min_coverage = number(g["min_coverage"], "registration.min_coverage");
+    if (g["full_coverage"]) o.full_coverage = number(g["full_coverage"], "registration.full_coverage");
+    if (const YAML::Node c = g["candidate_supports"]) {
+      if (!c.IsSequence()) fail("registration.candidate_supports", "expected a list of regions");
+      for (size_t i = 0; i < c.size(); ++i)
+        o.candidate_supports.push_back(region(c[i], "registration.candidate_supports." + std::to_string(i)));
+    }
+    if (g["support_stiffness"]) o.support_stiffness = number(g["support_stiffness"], "registration.support_stiffness");
+    if (g["support_gain"]) o.support_gain = number(g["support_gain"], "registration.support_gain");
+    if (const YAML::Node u = g["uncertainty"]) {
+      check_keys(u, "registration.uncertainty", {"patch_spacing", "force_ratio", "stiffness_log_sd"});
+      UncertaintyOptions& q = o.uncertainty;
+      if (u["patch_spacing"]) q.patch_spacing = number(u["patch_spacing"], "registration.uncertainty.patch_spacing");
+      if (u["force_ratio"]) q.force_ratio = number(u["force_ratio"], "registration.uncertainty.force_ratio");
+      if (u["stiffness_log_sd"]) q.stiffness_log_sd = number(u["stiffness_log_sd"], "registration.uncertainty.stiffness_log_sd");
+    }
   }
 
   void read_mesh_source(const YAML::Node& m, const std::string& base_dir, MeshSource& out) const {

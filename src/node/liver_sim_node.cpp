@@ -29,8 +29,10 @@
 #include "liver_sim/InstrumentCommand.h"
 #include "liver_sim/SetCapsule.h"
 #include "liver_sim/SimulationStatus.h"
+#include "liver_sim/TargetCovariances.h"
 #include "liver_sim/liver_model.h"
 #include "liver_sim/registration.h"
+#include "liver_sim/target_uncertainty.h"
 #include "liver_sim/worker_pool.h"
 #include "mesh_marker.h"
 
@@ -109,6 +111,10 @@ class LiverSimNode {
     }
     capsule_ = scene.capsule;
     registration_ = std::make_unique<SurfaceRegistration>(*model_, scene.registration);
+    uncertainty_ = std::make_unique<TargetUncertainty>(*model_, scene.registration.uncertainty);
+    compliance_ = std::make_unique<StateCompliance>(*model_);
+    pnh.param("uncertainty_period", uncertainty_period_, 1.0);
+    if (!(uncertainty_period_ >= 0)) throw std::invalid_argument("~uncertainty_period must be >= 0");
     // Clouds are cropped in the callback to the rest shape's box grown by the registration's
     // reach and ~cloud_margin for the liver's own motion.
     pnh.param("cloud_margin", cloud_margin_, 0.05);
@@ -139,6 +145,8 @@ class LiverSimNode {
     wrench_pub_ = pnh.advertise<geometry_msgs::WrenchStamped>("wrench", 10);
     target_marker_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("targets", 1, true);
     target_pose_pub_ = pnh.advertise<geometry_msgs::PoseArray>("target_poses", 1, true);
+    covariance_pub_ = pnh.advertise<TargetCovariances>("target_covariances", 1, true);
+    ellipsoid_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("target_ellipsoids", 1, true);
     pose_sub_ = nh.subscribe("instrument_pose", 1, &LiverSimNode::on_pose, this);
     command_sub_ = nh.subscribe("instrument_command", 10, &LiverSimNode::on_command, this);
     cloud_sub_ = nh.subscribe("points", 1, &LiverSimNode::on_cloud, this);
@@ -158,6 +166,7 @@ class LiverSimNode {
       must_step |= apply_inputs();
       std::optional<RegistrationFrame> registered = register_pending_cloud();
       if (registered) registering_ = true;
+      analyse_registration(registered.has_value());
       if (registered || must_step) {
         // While clouds come, the model converges on the last one in the registration's short
         // steps, so that the next cloud waits for one iteration, not a full solve.
@@ -212,6 +221,9 @@ class LiverSimNode {
       clouds_registered_ = 0;
       registration_rms_ = 0;
       correspondences_ = 0;
+      registered_ = RegistrationFrame();
+      covariances_.clear();
+      analysis_due_ = false;
       set_probe(std::nullopt);
       probe_pose_.reset();
       pose_changed_ = false;
@@ -393,6 +405,7 @@ class LiverSimNode {
         ++clouds_registered_;
         registration_rms_ = f.rms;
         correspondences_ = f.correspondences;
+        registered_ = f;
         reflected_stamp_ = cloud->stamp;
       }
       return f;
@@ -400,6 +413,28 @@ class LiverSimNode {
       std::lock_guard<std::mutex> lock(mutex_);
       reject(std::string("points: ") + e.what());
       return std::nullopt;
+    }
+  }
+
+  // At most once per ~uncertainty_period, after a cloud was registered: the targets'
+  // covariances and the candidate supports the clouds call for (one factorisation of the
+  // registered model's stiffness serves both). (simulation thread)
+  void analyse_registration(bool registered) {
+    analysis_due_ |= registered;
+    const ros::WallTime now = ros::WallTime::now();
+    if (!analysis_due_ || now < next_analysis_) return;
+    next_analysis_ = now + ros::WallDuration(uncertainty_period_);
+    analysis_due_ = false;
+    try {
+      compliance_->factorize();
+      covariances_.clear();
+      for (const TargetUncertainty::Covariance& c : uncertainty_->covariances(*compliance_, registration_->cloud_springs()))
+        covariances_.push_back(c.total);
+      analysis_stamp_ = ros::Time::now();
+      const int held = registration_->estimate_supports(*compliance_);
+      if (held >= 0) ROS_INFO("liver_sim: the clouds call for candidate support %d: held from the next cloud", held);
+    } catch (const std::runtime_error& e) {
+      ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", e.what());
     }
   }
 
@@ -453,6 +488,11 @@ class LiverSimNode {
     s.registration_rms = registration_rms_;
     s.correspondences = correspondences_;
     s.clouds_registered = clouds_registered_;
+    s.registration_coverage = registered_.coverage;
+    s.registration_inlier_fraction = registered_.inlier_fraction;
+    s.registration_rms_all = registered_.rms_all;
+    s.target_radius_95 = largest_radius_95();
+    for (bool held : registration_->supports_held()) s.supports_held += held;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       s.rejected_inputs = rejected_;
@@ -546,6 +586,44 @@ class LiverSimNode {
     }
     target_marker_pub_.publish(markers);
     target_pose_pub_.publish(poses);
+    if (covariances_.size() != targets.size()) return;  // no analysis since the last reset
+    TargetCovariances covariance;
+    covariance.header = header;
+    covariance.analysis_stamp = analysis_stamp_;
+    visualization_msgs::MarkerArray ellipsoids;
+    for (size_t i = 0; i < targets.size(); ++i) {
+      covariance.names.push_back(targets[i].name);
+      geometry_msgs::PoseWithCovariance p;
+      p.pose = poses.poses[i];
+      for (int a = 0; a < 3; ++a) {
+        for (int b = 0; b < 3; ++b) p.covariance[6 * a + b] = covariances_[i](a, b);
+        p.covariance[6 * (a + 3) + a + 3] = 1e6;  // the rotations are unknown
+      }
+      covariance.poses.push_back(p);
+      // The 95% ellipsoid: a sphere scaled along the covariance's eigenvectors.
+      const Ellipsoid e = ellipsoid_95(covariances_[i]);
+      const Eigen::Quaterniond q(e.axes);
+      visualization_msgs::Marker m = markers.markers[i];
+      m.ns = markers.markers[i].ns + "_95";
+      m.pose.orientation.x = q.x();
+      m.pose.orientation.y = q.y();
+      m.pose.orientation.z = q.z();
+      m.pose.orientation.w = q.w();
+      m.scale.x = std::max(2 * e.semi_axes.x(), 1e-4);  // rviz draws no zero-size marker
+      m.scale.y = std::max(2 * e.semi_axes.y(), 1e-4);
+      m.scale.z = std::max(2 * e.semi_axes.z(), 1e-4);
+      m.color.a = 0.3f;
+      ellipsoids.markers.push_back(m);
+    }
+    covariance_pub_.publish(covariance);
+    ellipsoid_pub_.publish(ellipsoids);
+  }
+
+  // The largest semi-axis of the targets' 95% ellipsoids (m), 0 before the first analysis.
+  double largest_radius_95() const {
+    double largest = 0;
+    for (const Eigen::Matrix3d& c : covariances_) largest = std::max(largest, ellipsoid_95(c).semi_axes.z());
+    return largest;
   }
 
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
@@ -563,6 +641,10 @@ class LiverSimNode {
     stat.add("point clouds received", clouds_);
     stat.add("point clouds registered", clouds_registered_);
     stat.add("registration RMS (m)", registration_rms_);
+    stat.add("registration coverage", registered_.coverage);
+    stat.add("registration inlier fraction", registered_.inlier_fraction);
+    stat.add("registration RMS of all points (m)", registered_.rms_all);
+    stat.add("target 95% radius, largest (m)", largest_radius_95());
     stat.add("last cloud size", last_cloud_points_);
     stat.add("last cloud filter time (s)", last_cloud_filter_s_);
     stat.add("last rejection", last_rejection_);
@@ -577,7 +659,11 @@ class LiverSimNode {
   double rate_, publish_rate_, probe_radius_, probe_length_, color_scale_max_, surface_alpha_;
   std::vector<std::string> instrument_frames_;
   ros::Publisher mesh_pub_, instrument_pub_, vessel_pub_, status_pub_, wrench_pub_, target_marker_pub_, target_pose_pub_;
+  ros::Publisher covariance_pub_, ellipsoid_pub_;
   std::unique_ptr<SurfaceRegistration> registration_;
+  std::unique_ptr<TargetUncertainty> uncertainty_;
+  std::unique_ptr<StateCompliance> compliance_;
+  double uncertainty_period_ = 1.0;  // s
   double cloud_margin_ = 0.05;  // m
   Eigen::AlignedBox3d cloud_box_;  // model frame: where cloud points can matter
   ros::Subscriber pose_sub_, command_sub_, cloud_sub_;
@@ -594,6 +680,11 @@ class LiverSimNode {
   bool registering_ = false;  // the model is converging on the last cloud
   double registration_rms_ = 0;
   int correspondences_ = 0;
+  RegistrationFrame registered_;  // the last registered cloud's frame
+  std::vector<Eigen::Matrix3d> covariances_;  // of the targets, m^2, at the last analysis
+  bool analysis_due_ = false;
+  ros::WallTime next_analysis_;
+  ros::Time analysis_stamp_;
 
   // Shared with callbacks, under mutex_.
   std::mutex mutex_;

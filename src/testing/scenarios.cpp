@@ -4,11 +4,49 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <stdexcept>
 
 namespace liver_sim {
 namespace {
 
 Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
+
+// The boundary node of the rest mesh nearest to p.
+int nearest_surface_node(const TetMesh& mesh, const Eigen::Vector3d& p) {
+  const Eigen::MatrixX3i F = boundary_triangles(mesh.T);
+  int best = -1;
+  double best_distance = std::numeric_limits<double>::infinity();
+  for (int t = 0; t < F.rows(); ++t)
+    for (int j = 0; j < 3; ++j) {
+      const double d = (mesh.V.row(F(t, j)).transpose() - p).norm();
+      if (d < best_distance) best_distance = d, best = F(t, j);
+    }
+  return best;
+}
+
+LoadOptions force(const Eigen::Vector3d& total, const Region& region) {
+  LoadOptions f;
+  f.kind = LoadOptions::Kind::Force;
+  f.vector = total;
+  f.region = region;
+  return f;
+}
+
+Region sphere(const Eigen::Vector3d& centre, double radius) {
+  Region r;
+  r.kind = Region::Kind::Sphere;
+  r.center = centre;
+  r.radius = radius;
+  return r;
+}
+
+Region box(const Eigen::Vector3d& min, const Eigen::Vector3d& max) {
+  Region r;
+  r.kind = Region::Kind::Box;
+  r.min = min;
+  r.max = max;
+  return r;
+}
 
 }  // namespace
 
@@ -133,6 +171,72 @@ CameraView front_view(const Eigen::VectorXd& x) {
   view.eye = centre + 0.25 * Eigen::Vector3d(0.0, -1.0, 0.6).normalized();
   view.target = centre;
   return view;
+}
+
+const std::vector<std::string>& surgical_scenario_names() {
+  static const std::vector<std::string> names{"lift", "press", "breathing", "pneumoperitoneum"};
+  return names;
+}
+
+SurgicalScenario surgical_scenario(const std::string& name, const TetMesh& mesh) {
+  const Eigen::Vector3d low = mesh.V.colwise().minCoeff().transpose(), high = mesh.V.colwise().maxCoeff().transpose();
+  const Eigen::Vector3d span = high - low;
+  SurgicalScenario s;
+  s.name = name;
+  if (name == "lift") {
+    s.loads.push_back(underside_lift(mesh, 5.0));
+    // The retractor's blade under the lifted lobe, its shaft leaving anteriorly and down.
+    const int tip = nearest_surface_node(mesh, Eigen::Vector3d(low.x() + 0.8 * span.x(), low.y() + 0.5 * span.y(), low.z() - 0.05));
+    s.instruments.push_back({tip, mesh.V.row(tip).transpose() + Eigen::Vector3d(-0.02, -0.25, -0.06), 5e-3});
+  } else if (name == "press") {
+    // Over the tumour (right lobe, anterior face), pressing posterior and a little down.
+    const int tip = nearest_surface_node(mesh, Eigen::Vector3d(low.x() + 0.75 * span.x(), low.y() - 0.1, low.z() + 0.45 * span.z()));
+    const Eigen::Vector3d contact = mesh.V.row(tip).transpose();
+    s.loads.push_back(force(2.0 * Eigen::Vector3d(0.0, 1.0, -0.3).normalized(), sphere(contact, 0.012)));
+    s.instruments.push_back({tip, contact + 0.2 * Eigen::Vector3d(0.3, -1.0, 0.5).normalized(), 5e-3});
+  } else if (name == "breathing") {
+    s.loads.push_back(force(4.0 * Eigen::Vector3d(0.0, -0.3, -1.0).normalized(),
+                            box(Eigen::Vector3d(low.x() - 1e-3, low.y() - 1e-3, high.z() - 0.25 * span.z()), high.array() + 1e-3)));
+  } else if (name == "pneumoperitoneum") {
+    LoadOptions p;
+    p.kind = LoadOptions::Kind::Pressure;
+    p.pressure = 300.0;
+    p.region = box(low.array() - 1e-3, Eigen::Vector3d(high.x() + 1e-3, low.y() + 0.3 * span.y(), high.z() + 1e-3));
+    s.loads.push_back(p);
+  } else {
+    throw std::invalid_argument("unknown surgical scenario '" + name + "' (lift, press, breathing, pneumoperitoneum)");
+  }
+  return s;
+}
+
+std::vector<LoadOptions> scaled(const std::vector<LoadOptions>& loads, double s) {
+  std::vector<LoadOptions> out = loads;
+  for (LoadOptions& l : out) {
+    l.vector *= s;
+    l.pressure *= s;
+  }
+  return out;
+}
+
+std::vector<InstrumentShaft> instrument_shafts(const SurgicalScenario& scenario, const Eigen::VectorXd& x,
+                                               const Eigen::MatrixX3i& boundary) {
+  std::vector<InstrumentShaft> shafts;
+  for (const VisibleInstrument& v : scenario.instruments) {
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();  // area-weighted, of the triangles at the node
+    for (int t = 0; t < boundary.rows(); ++t)
+      if (boundary(t, 0) == v.node || boundary(t, 1) == v.node || boundary(t, 2) == v.node)
+        normal += (node(x, boundary(t, 1)) - node(x, boundary(t, 0))).cross(node(x, boundary(t, 2)) - node(x, boundary(t, 0)));
+    shafts.push_back({node(x, v.node) + v.radius * normal.normalized(), v.trocar, v.radius});
+  }
+  return shafts;
+}
+
+DepthCamera front_depth_camera(const Eigen::VectorXd& x) {
+  const CameraView view = front_view(x);
+  DepthCamera camera;
+  camera.eye = view.eye;
+  camera.target = view.target;
+  return camera;
 }
 
 }  // namespace liver_sim

@@ -1,5 +1,6 @@
 // Synthetic intra-operative scenarios for the benchmarks and the tests (not the product): a
-// depth camera's view of the surface and a retractor's lift. Built into liver_sim_testing.
+// view of the surface, a retractor's lift and the other deformations of surgery. Built into
+// liver_sim_testing. A depth sensor's view with its defects: depth_camera.h.
 #pragma once
 
 #include <pcl/point_cloud.h>
@@ -7,6 +8,10 @@
 
 #include <Eigen/Core>
 
+#include <string>
+#include <vector>
+
+#include "depth_camera.h"
 #include "liver_sim/mesh.h"
 #include "liver_sim/options.h"
 
@@ -39,5 +44,37 @@ SyntheticCloud render_surface_cloud(const Eigen::VectorXd& x, const Eigen::Matri
 LoadOptions underside_lift(const TetMesh& mesh, double newtons);
 // A camera 25 cm from the centroid of positions x, anterior-superior (-y, +z), looking at it.
 CameraView front_view(const Eigen::VectorXd& x);
+
+// An instrument the camera sees: a shaft from a tissue surface node (its tip rests on the
+// surface there, pushed out along the node's normal by the radius) to a fixed trocar.
+struct VisibleInstrument {
+  int node = -1;
+  Eigen::Vector3d trocar = Eigen::Vector3d::Zero();  // m
+  double radius = 5e-3;                              // m
+};
+// A deformation of surgery on the phantom's anatomy: the loads that make it at full strength
+// (added to the scene's), and the instruments that make it. Regions are placed from the rest
+// mesh's bounding box and nearest surface nodes, so that the same name loads the same anatomy on
+// any mesh of the phantom (the model's and the finer truth's).
+//   lift              a retractor under the right lobe: 5 N up (underside_lift)
+//   press             an instrument pressing the right lobe's anterior face above the tumour:
+//                     2 N posterior and down, on the nodes within 12 mm of the contact
+//   breathing         the diaphragm pushing the superior dome 4 N caudally and anteriorly
+//   pneumoperitoneum  the insufflation's pressure on the anterior third, 300 Pa inward
+struct SurgicalScenario {
+  std::string name;
+  std::vector<LoadOptions> loads;
+  std::vector<VisibleInstrument> instruments;
+};
+// Throws std::invalid_argument for an unknown name.
+SurgicalScenario surgical_scenario(const std::string& name, const TetMesh& mesh);
+const std::vector<std::string>& surgical_scenario_names();
+// The loads times s (forces and pressures; gravity is not among them).
+std::vector<LoadOptions> scaled(const std::vector<LoadOptions>& loads, double s);
+// The scenario's instruments where the tissue (boundary triangles at positions x) has them.
+std::vector<InstrumentShaft> instrument_shafts(const SurgicalScenario& scenario, const Eigen::VectorXd& x,
+                                               const Eigen::MatrixX3i& boundary);
+// The depth camera at front_view's pose, looking at the centroid of x.
+DepthCamera front_depth_camera(const Eigen::VectorXd& x);
 
 }  // namespace liver_sim

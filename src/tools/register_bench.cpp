@@ -1,19 +1,28 @@
-// Registration benchmark without hardware (doc/registration.md). Ground truth: the scene's
-// static equilibrium (the pre-operative model), then the same model lifted by a known force on
-// the underside of the right lobe, ramped over the frames (a retractor lifting the liver). Each
-// frame a camera renders a partial, noisy cloud of the ground truth's visible surface
-// (render_surface_cloud), with outliers, and the model registers to it, warm-started from the
-// previous frame. Reported: the target registration error (TRE) of the tumour probes and vessel
-// bifurcations against the ground truth before and after registration, the surface error, and
-// the time per frame.
-//   register_bench --scene FILE [--set K=V]... [--frames N] [--lift NEWTONS] [--repeats R]
-//                  [--noise M,...] [--visible FRACTION,...] [--outliers FRACTION,...]
-//                  [--csv FILE] [--quiet]
+// Registration benchmark without hardware (doc/registration.md). A ground truth deforms over the
+// frames under a surgical load (scenarios.h: a retractor's lift, an instrument's pressure, the
+// diaphragm, the pneumoperitoneum), ramped from 0 to full; each frame a sensor renders the
+// truth's visible surface and the model registers the cloud, warm-started from the last frame.
+// The truth is either
+//   - the model's own scene (the inverse crime: same mesh, material and attachments), or
+//   - an independent truth (--truth-scene, scripts/make_truth_phantom.py): a finer mesh of the
+//     same anatomy, another material, an attachment the model does not know; its targets are
+//     the same material points embedded in its own tetrahedra.
+// The sensor is a depth camera (depth_camera.h: noise growing with depth squared, holes at
+// grazing angles and depth edges, instruments in view, blood, a partial field of view) or the
+// surface sampler (render_surface_cloud: uniform samples, Gaussian noise, uniform outliers).
+// Reported per case: the target registration error (TRE) of the tumour probes and vessel
+// bifurcations at the last frame (mean, 95th percentile, max; tumour and bifurcations apart),
+// before and after registration, and the time per frame.
+//   register_bench --scene FILE [--set K=V]... [--truth-scene FILE] [--scenario NAME,...]
+//                  [--sensor depth|surface] [--frames N] [--repeats R] [--noise M,...]
+//                  [--visible FRACTION,...] [--outliers FRACTION,...] [--stiffness SCALE,...]
+//                  [--attachments model|truth] [--supports estimate|off] [--camera-motion DEG]
+//                  [--csv FILE] [--targets-csv FILE] [--quiet]
 // Every combination of the lists is one CSV row (standard output or --csv), over R runs with
-// other random clouds: TRE and surface errors averaged, maxima the largest, frame times pooled.
-// Progress on stderr.
-// Pin it (taskset -c 0) for timings.
+// other random clouds; --targets-csv writes every target's error at the last frame of every run.
+// Progress on stderr. Pin it (taskset -c 0) for timings.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
@@ -23,8 +32,10 @@
 #include <string>
 #include <vector>
 
+#include "depth_camera.h"
 #include "liver_sim/liver_model.h"
 #include "liver_sim/registration.h"
+#include "liver_sim/target_uncertainty.h"
 #include "scenarios.h"
 
 namespace {
@@ -32,26 +43,37 @@ namespace {
 using namespace liver_sim;
 
 const char* kUsage =
-    "usage: register_bench --scene FILE [--set K=V]... [--frames N] [--lift NEWTONS] [--repeats R]\n"
-    "                      [--noise M,...] [--visible FRACTION,...] [--outliers FRACTION,...]\n"
-    "                      [--csv FILE] [--quiet]\n";
+    "usage: register_bench --scene FILE [--set K=V]... [--truth-scene FILE] [--scenario NAME,...]\n"
+    "                      [--sensor depth|surface] [--frames N] [--repeats R] [--noise M,...]\n"
+    "                      [--visible FRACTION,...] [--outliers FRACTION,...] [--stiffness SCALE,...]\n"
+    "                      [--attachments model|truth] [--supports estimate|off] [--camera-motion DEG]\n"
+    "                      [--csv FILE]"
+    "                      [--targets-csv FILE] [--quiet]\n";
 
-std::vector<double> list(const std::string& s) {
-  std::vector<double> v;
+template <typename T, typename Parse>
+std::vector<T> list(const std::string& s, Parse parse) {
+  std::vector<T> v;
   std::stringstream in(s);
   std::string part;
-  while (std::getline(in, part, ',')) v.push_back(std::stod(part));
+  while (std::getline(in, part, ',')) v.push_back(parse(part));
   if (v.empty()) throw std::invalid_argument("empty list");
   return v;
 }
+std::vector<double> numbers(const std::string& s) {
+  return list<double>(s, [](const std::string& p) { return std::stod(p); });
+}
 
 struct Options {
-  std::string scene, csv;
+  std::string scene, truth_scene, csv, targets_csv;
   std::vector<std::string> overrides;
+  std::vector<std::string> scenarios{"lift"};
+  bool depth_sensor = true;
   int frames = 10;
-  double lift = 5.0;  // N
-  int repeats = 1;    // runs of each case with other random draws
-  std::vector<double> noise{1e-3}, visible{0.3}, outliers{0.0};
+  int repeats = 1;  // runs of each case with other random draws
+  std::vector<double> noise{1e-3}, visible{0.3}, outliers{0.0}, stiffness{1.0};
+  bool truth_attachments = false;
+  bool estimate_supports = true;  // hold the scene's candidate supports the clouds call for
+  double camera_motion = 0;  // deg
   bool quiet = false;
 };
 
@@ -65,18 +87,36 @@ Options parse(int argc, char** argv) {
     };
     if (a == "--scene") o.scene = value();
     else if (a == "--set") o.overrides.push_back(value());
-    else if (a == "--frames") o.frames = std::stoi(value());
-    else if (a == "--lift") o.lift = std::stod(value());
+    else if (a == "--truth-scene") o.truth_scene = value();
+    else if (a == "--scenario") o.scenarios = list<std::string>(value(), [](const std::string& p) { return p; });
+    else if (a == "--sensor") {
+      const std::string s = value();
+      if (s != "depth" && s != "surface") throw std::invalid_argument("--sensor must be depth or surface");
+      o.depth_sensor = s == "depth";
+    } else if (a == "--frames") o.frames = std::stoi(value());
     else if (a == "--repeats") o.repeats = std::stoi(value());
-    else if (a == "--noise") o.noise = list(value());
-    else if (a == "--visible") o.visible = list(value());
-    else if (a == "--outliers") o.outliers = list(value());
+    else if (a == "--noise") o.noise = numbers(value());
+    else if (a == "--visible") o.visible = numbers(value());
+    else if (a == "--outliers") o.outliers = numbers(value());
+    else if (a == "--stiffness") o.stiffness = numbers(value());
+    else if (a == "--attachments") {
+      const std::string s = value();
+      if (s != "model" && s != "truth") throw std::invalid_argument("--attachments must be model or truth");
+      o.truth_attachments = s == "truth";
+    } else if (a == "--supports") {
+      const std::string s = value();
+      if (s != "estimate" && s != "off") throw std::invalid_argument("--supports must be estimate or off");
+      o.estimate_supports = s == "estimate";
+    } else if (a == "--camera-motion") o.camera_motion = std::stod(value());
     else if (a == "--csv") o.csv = value();
+    else if (a == "--targets-csv") o.targets_csv = value();
     else if (a == "--quiet") o.quiet = true;
     else throw std::invalid_argument("unknown argument " + a);
   }
   if (o.scene.empty()) throw std::invalid_argument("--scene is required");
   if (o.frames < 1 || o.repeats < 1) throw std::invalid_argument("--frames and --repeats must be >= 1");
+  for (double s : o.stiffness)
+    if (!(s > 0)) throw std::invalid_argument("--stiffness scales must be > 0");
   return o;
 }
 
@@ -86,33 +126,72 @@ std::vector<Eigen::Vector3d> target_positions(const LiverModel& m) {
   return p;
 }
 
-struct Errors {
-  double mean = 0, max = 0;
-  int worst = 0;  // index of the target with the largest error
+// The truth over the frames: positions, boundary, targets; frame 0 is the scene at rest under
+// its own loads (the pre-operative state), frame k has the scenario's loads at k / frames.
+struct Truth {
+  TetMesh mesh;
+  Eigen::MatrixX3i boundary;
+  std::vector<Eigen::VectorXd> x;
+  std::vector<std::vector<Eigen::Vector3d>> targets;
+  std::vector<std::string> names;
+  std::vector<bool> tumour;  // per target: a probe (the tumour), else a bifurcation
 };
-Errors distance(const std::vector<Eigen::Vector3d>& a, const std::vector<Eigen::Vector3d>& b) {
-  Errors e;
-  for (size_t i = 0; i < a.size(); ++i) {
-    const double d = (a[i] - b[i]).norm();
-    e.mean += d / a.size();
-    if (d > e.max) e.max = d, e.worst = static_cast<int>(i);
+
+Truth make_truth(const Scene& scene, const SurgicalScenario& scenario, int frames, bool quiet) {
+  Truth truth;
+  truth.mesh = load_scene_mesh(scene);
+  Scene s = scene;
+  s.solver.mode = SolverOptions::Mode::Static;
+  s.solver.strategy = SolverOptions::Strategy::NewtonKrylov;
+  s.solver.tolerance = 1e-9;
+  s.solver.max_iterations = 100;
+  const size_t scene_loads = s.loads.size();
+  for (int k = 0; k <= frames; ++k) {
+    s.loads.resize(scene_loads);
+    for (const LoadOptions& l : scaled(scenario.loads, static_cast<double>(k) / frames)) s.loads.push_back(l);
+    LiverModel m(truth.mesh, s);
+    if (k > 0) m.set_positions(truth.x.back());  // continuation from the last frame
+    const StepResult r = m.step();
+    if (!r.converged())
+      throw std::runtime_error("truth frame " + std::to_string(k) + " of " + scenario.name + " did not converge: " + r.message);
+    truth.x.push_back(m.positions());
+    truth.targets.push_back(target_positions(m));
+    if (k == 0) {
+      truth.boundary = m.boundary();
+      for (const TrackedTarget& t : tracked_targets(m)) {
+        truth.names.push_back(t.name);
+        truth.tumour.push_back(t.kind == TrackedTarget::Kind::Probe);
+      }
+    }
+    if (!quiet) std::cerr << "\rtruth " << scenario.name << " " << k << "/" << frames << std::flush;
+  }
+  if (!quiet) std::cerr << "\n";
+  return truth;
+}
+
+// The springs' energy at the model's state (J): how hard the cloud pulls against the model.
+double spring_energy(const LiverModel& m) {
+  double e = 0;
+  for (const SurfaceTarget& t : m.surface_targets()) {
+    Eigen::Vector3d gap = -t.point;
+    for (int j = 0; j < 3; ++j) gap += t.weights[j] * m.positions().segment<3>(3 * m.boundary()(t.triangle, j));
+    e += 0.5 * t.stiffness * (t.normal.isZero(0.0) ? gap.squaredNorm() : std::pow(t.normal.dot(gap), 2));
   }
   return e;
 }
 
-double boundary_error(const LiverModel& m, const Eigen::VectorXd& truth) {
-  // RMS over the boundary nodes (the surface error), m.
-  std::vector<char> on(m.mesh().V.rows(), 0);
-  for (int t = 0; t < m.boundary().rows(); ++t)
-    for (int j = 0; j < 3; ++j) on[m.boundary()(t, j)] = 1;
-  double sum = 0;
-  int n = 0;
-  for (size_t i = 0; i < on.size(); ++i)
-    if (on[i]) {
-      sum += (m.positions().segment<3>(3 * i) - truth.segment<3>(3 * i)).squaredNorm();
-      ++n;
-    }
-  return std::sqrt(sum / n);
+struct Stats {
+  double mean = 0, p95 = 0, max = 0;
+};
+Stats stats(std::vector<double> v) {
+  Stats s;
+  if (v.empty()) return s;
+  std::sort(v.begin(), v.end());
+  for (double d : v) s.mean += d / v.size();
+  // Nearest rank.
+  s.p95 = v[std::min(v.size() - 1, static_cast<size_t>(std::ceil(0.95 * v.size())) - 1)];
+  s.max = v.back();
+  return s;
 }
 
 }  // namespace
@@ -126,104 +205,182 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    Scene scene = load_scene(opt.scene, opt.overrides);
+    const Scene scene = load_scene(opt.scene, opt.overrides);
     const TetMesh mesh = load_scene_mesh(scene);
-    // Ground truth frames: a model per lift value, each solved tightly from rest.
-    std::vector<Eigen::VectorXd> truth;
-    std::vector<std::vector<Eigen::Vector3d>> truth_targets;
-    Scene truth_scene = scene;
-    truth_scene.solver.mode = SolverOptions::Mode::Static;
-    truth_scene.solver.tolerance = 1e-10;
-    truth_scene.solver.max_iterations = 100;
-    truth_scene.loads.push_back(underside_lift(mesh, 0.0));
-    for (int k = 0; k <= opt.frames; ++k) {
-      truth_scene.loads.back() = underside_lift(mesh, opt.lift * k / opt.frames);
-      LiverModel m(mesh, truth_scene);
-      const StepResult r = m.step();
-      if (!r.converged()) throw std::runtime_error("ground truth frame " + std::to_string(k) + " did not converge: " + r.message);
-      truth.push_back(m.positions());
-      truth_targets.push_back(target_positions(m));
-      if (!opt.quiet) std::cerr << "\rground truth " << k << "/" << opt.frames << std::flush;
-    }
-    if (!opt.quiet) std::cerr << "\n";
+    const Scene truth_scene = opt.truth_scene.empty() ? scene : load_scene(opt.truth_scene);
+    const bool inverse_crime = opt.truth_scene.empty();
 
-    // The pre-operative model: the scene at its equilibrium (frame 0 of the truth, no lift).
-    LiverModel model(mesh, scene);
-    const Eigen::VectorXd& preoperative = truth[0];
-    const std::vector<Eigen::Vector3d>& preoperative_targets = truth_targets[0];
-    std::vector<std::string> names;
-    for (const TrackedTarget& t : tracked_targets(model)) names.push_back(t.name);
-
-    std::ofstream file;
+    std::ofstream file, target_file;
     if (!opt.csv.empty()) file.open(opt.csv);
     std::ostream& out = opt.csv.empty() ? std::cout : file;
-    out << "noise_m,visible_request,visible_fraction,outlier_fraction,frames,cloud_points,used_points,"
-           "correspondences,tre_unregistered_mean_mm,tre_unregistered_max_mm,tre_mean_mm,tre_max_mm,"
-           "tre_worst_frame_max_mm,surface_error_mm,spring_rms_mm,frame_median_ms,frame_max_ms,filter_ms,"
-           "correspondence_ms,solve_ms,newton_per_frame,factorizations_per_frame,diverged,tumour_tre_mean_mm,"
-           "worst_target\n";
+    out << "truth,scenario,sensor,noise_m,visible_request,visible_fraction,returned_fraction,outlier_fraction,stiffness_scale,"
+           "stiffness_ratio,attachments,frames,cloud_points,used_points,correspondences,coverage,"
+           "tre_unregistered_mean_mm,tre_unregistered_max_mm,tre_mean_mm,tre_p95_mm,tre_max_mm,tumour_mean_mm,"
+           "tumour_p95_mm,tumour_max_mm,bifurcation_mean_mm,bifurcation_p95_mm,bifurcation_max_mm,"
+           "frame_median_ms,frame_max_ms,filter_ms,correspondence_ms,solve_ms,newton_per_frame,diverged,worst_target,"
+           "inside_95,radius_95_mean_mm,spring_energy_uj,analysis_ms,supports\n";
     out << std::setprecision(6);
-    const int cases = static_cast<int>(opt.noise.size() * opt.visible.size() * opt.outliers.size());
-    int done = 0;
-    for (double noise : opt.noise)
-      for (double visible : opt.visible)
-        for (double outliers : opt.outliers) {
-          CameraView view = front_view(preoperative);
-          view.visible_fraction = visible;
-          view.noise = noise;
-          view.outlier_fraction = outliers;
-          std::vector<double> frame_ms;
-          double worst = 0, achieved = 0, tre_mean = 0, tre_max = 0, surface_error = 0, rms = 0, tumour = 0;
-          std::string worst_target;
-          int newton = 0, diverged = 0, cloud_points = 0, factorizations = 0;
-          double filter_ms = 0, correspondence_ms = 0, solve_ms = 0;
-          const int runs = opt.frames * opt.repeats;
-          RegistrationFrame last;
-          for (int r = 0; r < opt.repeats; ++r) {
-            model.reset();
-            model.set_positions(preoperative);
-            SurfaceRegistration registration(model, scene.registration);
-            for (int k = 1; k <= opt.frames; ++k) {
-              view.seed = 1000 * r + k;  // the same draws for every case: differences are the case's
-              const SyntheticCloud cloud = render_surface_cloud(truth[k], model.boundary(), view);
-              achieved = cloud.visible_fraction;
-              cloud_points = static_cast<int>(cloud.cloud.size());
-              last = registration.register_cloud(cloud.cloud, view.eye);
-              frame_ms.push_back(last.total_ms);
-              newton += last.newton_iterations;
-              factorizations += last.factorizations;
-              filter_ms += last.filter_ms / runs;
-              correspondence_ms += last.correspondence_ms / runs;
-              solve_ms += last.solve_ms / runs;
-              diverged += last.step.status == StepResult::Status::Diverged;
-              worst = std::max(worst, distance(target_positions(model), truth_targets[k]).max);
-            }
-            const std::vector<Eigen::Vector3d> registered = target_positions(model);
-            const Errors after = distance(registered, truth_targets[opt.frames]);
-            tre_mean += after.mean / opt.repeats;
-            if (after.max > tre_max) tre_max = after.max, worst_target = names[after.worst];
-            for (int i = 0; i < model.num_probes(); ++i)  // the probes are the tumour's points
-              tumour += (registered[i] - truth_targets[opt.frames][i]).norm() / (model.num_probes() * opt.repeats);
-            surface_error += boundary_error(model, truth[opt.frames]) / opt.repeats;
-            rms += last.rms / opt.repeats;
-          }
-          const Errors before = distance(preoperative_targets, truth_targets[opt.frames]);
-          std::vector<double> sorted = frame_ms;
-          std::sort(sorted.begin(), sorted.end());
-          out << noise << "," << visible << "," << achieved << "," << outliers << "," << opt.frames << ","
-              << cloud_points << "," << last.used_points << "," << last.correspondences << "," << 1e3 * before.mean << ","
-              << 1e3 * before.max << "," << 1e3 * tre_mean << "," << 1e3 * tre_max << "," << 1e3 * worst << ","
-              << 1e3 * surface_error << "," << 1e3 * rms << "," << sorted[sorted.size() / 2] << "," << sorted.back()
-              << "," << filter_ms << "," << correspondence_ms << "," << solve_ms << ","
-              << static_cast<double>(newton) / runs << "," << static_cast<double>(factorizations) / runs << ","
-              << diverged << "," << 1e3 * tumour << "," << worst_target << "\n"
-              << std::flush;
-          ++done;
-          if (!opt.quiet)
-            std::cerr << "case " << done << "/" << cases << ": noise " << 1e3 * noise << " mm, visible " << achieved
-                      << ", outliers " << outliers << ": TRE " << 1e3 * tre_mean << " mm (max " << 1e3 * tre_max
-                      << ", unregistered " << 1e3 * before.mean << "), " << sorted[sorted.size() / 2] << " ms/frame\n";
+    if (!opt.targets_csv.empty()) {
+      target_file.open(opt.targets_csv);
+      target_file << "truth,scenario,noise_m,visible_request,stiffness_scale,repeat,target,tumour,unregistered_mm,"
+                     "error_x_mm,error_y_mm,error_z_mm,mahalanobis_squared";
+      // The covariance (mm^2) and its parts: xx, yy, zz, xy, xz, yz each.
+      for (const char* part : {"total", "forces", "stiffness", "noise"})
+        for (const char* entry : {"xx", "yy", "zz", "xy", "xz", "yz"}) target_file << "," << part << "_" << entry;
+      target_file << "\n" << std::setprecision(6);
+    }
+    const std::string truth_name = inverse_crime ? "model" : "independent";
+    for (const std::string& scenario_name : opt.scenarios) {
+      const SurgicalScenario truth_scenario = surgical_scenario(scenario_name, load_scene_mesh(truth_scene));
+      const Truth truth = make_truth(truth_scene, truth_scenario, opt.frames, opt.quiet);
+      const int last = opt.frames;
+      for (double stiffness : opt.stiffness) {
+        Scene model_scene = scene;
+        model_scene.parenchyma.young_modulus *= stiffness;
+        if (opt.truth_attachments) model_scene.fixed = truth_scene.fixed;
+        if (opt.truth_attachments || !opt.estimate_supports) model_scene.registration.candidate_supports.clear();
+        LiverModel model(mesh, model_scene);
+        // The pre-operative model: its own scene at equilibrium (the inverse crime: the truth's
+        // frame 0 exactly).
+        {
+          Scene tight = model_scene;
+          tight.solver.mode = SolverOptions::Mode::Static;
+          tight.solver.tolerance = 1e-10;
+          tight.solver.max_iterations = 100;
+          LiverModel rest(mesh, tight);
+          const StepResult r = rest.step();
+          if (!r.converged()) throw std::runtime_error("the pre-operative model did not converge: " + r.message);
+          model.set_positions(rest.positions());
         }
+        const Eigen::VectorXd preoperative = model.positions();
+        const std::vector<Eigen::Vector3d> preoperative_targets = target_positions(model);
+        TargetUncertainty uncertainty(model, model_scene.registration.uncertainty);
+        StateCompliance compliance(model);
+        if (preoperative_targets.size() != truth.names.size())
+          throw std::runtime_error("the model tracks " + std::to_string(preoperative_targets.size()) + " targets, the truth " +
+                                   std::to_string(truth.names.size()));
+        std::vector<double> unregistered;
+        for (size_t i = 0; i < truth.names.size(); ++i)
+          unregistered.push_back((preoperative_targets[i] - truth.targets[last][i]).norm());
+        const Stats before = stats(unregistered);
+        const double ratio = model_scene.parenchyma.young_modulus / truth_scene.parenchyma.young_modulus;
+        for (double noise : opt.noise)
+          for (double visible : opt.visible)
+            for (double outliers : opt.outliers) {
+              std::vector<double> frame_ms, all, tumour, bifurcation, radius;
+              double inside = 0, energy = 0, analysis_ms = 0;
+              std::string held;
+              double achieved = 0, returned = 0, filter_ms = 0, correspondence_ms = 0, solve_ms = 0, coverage = 0;
+              double outlier_share = 0;
+              int newton = 0, diverged = 0, cloud_points = 0;
+              const int runs = opt.frames * opt.repeats;
+              RegistrationFrame frame;
+              std::string worst_target;
+              double worst = -1;
+              for (int r = 0; r < opt.repeats; ++r) {
+                model.reset();
+                model.set_positions(preoperative);
+                SurfaceRegistration registration(model, model_scene.registration);
+                std::vector<TargetUncertainty::Covariance> covariance;
+                for (int k = 1; k <= opt.frames; ++k) {
+                  const unsigned seed = 1000 * r + k;  // the same draws for every case: differences are the case's
+                  // The camera at the front, swaying by +-camera_motion about the vertical through the liver.
+                  const double sway = opt.camera_motion * M_PI / 180 * std::sin(2 * M_PI * k / opt.frames);
+                  const Eigen::AngleAxisd turn(sway, Eigen::Vector3d::UnitZ());
+                  pcl::PointCloud<pcl::PointXYZ> cloud;
+                  Eigen::Vector3d eye;
+                  if (opt.depth_sensor) {
+                    DepthCamera camera = front_depth_camera(truth.x[0]);
+                    camera.eye = camera.target + turn * (camera.eye - camera.target);
+                    camera.visible_fraction = visible;
+                    camera.depth_noise = noise;
+                    camera.seed = seed;
+                    const DepthCloud c = render_depth_cloud(truth.x[k], truth.boundary,
+                                                            instrument_shafts(truth_scenario, truth.x[k], truth.boundary), camera);
+                    cloud = c.cloud;
+                    achieved = c.visible_fraction;
+                    returned = c.returned_fraction;
+                    outlier_share = c.cloud.empty() ? 0.0 : static_cast<double>(c.instrument_points) / c.cloud.size();
+                    eye = camera.eye;
+                  } else {
+                    CameraView view = front_view(truth.x[0]);
+                    view.eye = view.target + turn * (view.eye - view.target);
+                    view.visible_fraction = visible;
+                    view.noise = noise;
+                    view.outlier_fraction = outliers;
+                    view.seed = seed;
+                    const SyntheticCloud c = render_surface_cloud(truth.x[k], truth.boundary, view);
+                    cloud = c.cloud;
+                    achieved = returned = c.visible_fraction;
+                    outlier_share = outliers;
+                    eye = view.eye;
+                  }
+                  cloud_points = static_cast<int>(cloud.size());
+                  frame = registration.register_cloud(cloud, eye);
+                  // The analyses: which candidate supports to hold (every frame), the targets'
+                  // covariances (at the last).
+                  const auto t0 = std::chrono::steady_clock::now();
+                  compliance.factorize();
+                  if (k == opt.frames) covariance = uncertainty.covariances(compliance, registration.cloud_springs());
+                  registration.estimate_supports(compliance);
+                  analysis_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / runs;
+                  frame_ms.push_back(frame.total_ms);
+                  newton += frame.newton_iterations;
+                  filter_ms += frame.filter_ms / runs;
+                  correspondence_ms += frame.correspondence_ms / runs;
+                  solve_ms += frame.solve_ms / runs;
+                  coverage += frame.coverage / runs;
+                  diverged += frame.step.status == StepResult::Status::Diverged;
+                }
+                const std::vector<Eigen::Vector3d> registered = target_positions(model);
+                energy += spring_energy(model) / opt.repeats;
+                held.clear();
+                for (size_t c = 0; c < registration.supports_held().size(); ++c) {
+                  std::ostringstream gain;
+                  gain << std::setprecision(2) << registration.support_gains()[c];
+                  held += (c ? " " : "") + std::string(registration.supports_held()[c] ? "held:" : "") + gain.str();
+                }
+                for (size_t i = 0; i < registered.size(); ++i) {
+                  const Eigen::Vector3d e = registered[i] - truth.targets[last][i];
+                  // Inside the 95% ellipsoid: e^T C^-1 e below the chi-square quantile of 3 DOF.
+                  const double d2 = e.dot(covariance[i].total.ldlt().solve(e));
+                  inside += (d2 <= kChiSquare3At95) / static_cast<double>(registered.size() * opt.repeats);
+                  radius.push_back(ellipsoid_95(covariance[i].total).semi_axes.z());
+                  all.push_back(e.norm());
+                  (truth.tumour[i] ? tumour : bifurcation).push_back(e.norm());
+                  if (e.norm() > worst) worst = e.norm(), worst_target = truth.names[i];
+                  if (target_file.is_open())
+                    target_file << truth_name << "," << scenario_name << "," << noise << "," << visible << "," << stiffness << ","
+                                << r << "," << truth.names[i] << "," << truth.tumour[i] << "," << 1e3 * unregistered[i] << ","
+                                << 1e3 * e.x() << "," << 1e3 * e.y() << "," << 1e3 * e.z() << "," << d2;
+                  for (const Eigen::Matrix3d* c : {&covariance[i].total, &covariance[i].forces, &covariance[i].stiffness,
+                                                   &covariance[i].noise})
+                    for (const auto& [a, b] : {std::pair{0, 0}, {1, 1}, {2, 2}, {0, 1}, {0, 2}, {1, 2}})
+                      target_file << "," << 1e6 * (*c)(a, b);
+                  target_file << "\n";
+                }
+              }
+              const Stats a = stats(all), t = stats(tumour), b = stats(bifurcation);
+              std::vector<double> sorted = frame_ms;
+              std::sort(sorted.begin(), sorted.end());
+              out << truth_name << "," << scenario_name << "," << (opt.depth_sensor ? "depth" : "surface") << "," << noise
+                  << "," << visible << "," << achieved << "," << returned << "," << outlier_share << "," << stiffness << "," << ratio << ","
+                  << (opt.truth_attachments ? "truth" : "model") << "," << opt.frames << "," << cloud_points << ","
+                  << frame.used_points << "," << frame.correspondences << "," << coverage << "," << 1e3 * before.mean << ","
+                  << 1e3 * before.max << "," << 1e3 * a.mean << "," << 1e3 * a.p95 << "," << 1e3 * a.max << ","
+                  << 1e3 * t.mean << "," << 1e3 * t.p95 << "," << 1e3 * t.max << "," << 1e3 * b.mean << "," << 1e3 * b.p95
+                  << "," << 1e3 * b.max << "," << sorted[sorted.size() / 2] << "," << sorted.back() << "," << filter_ms << ","
+                  << correspondence_ms << "," << solve_ms << "," << static_cast<double>(newton) / runs << "," << diverged
+                  << "," << worst_target << "," << inside << "," << 1e3 * stats(radius).mean << "," << 1e6 * energy << "," << analysis_ms << "," << held << "\n"
+                  << std::flush;
+              if (!opt.quiet)
+                std::cerr << truth_name << " " << scenario_name << ": noise " << 1e3 * noise << " mm, visible " << achieved
+                          << ", stiffness x" << stiffness << " (ratio " << ratio << "): TRE " << 1e3 * a.mean << " mm (p95 "
+                          << 1e3 * a.p95 << ", max " << 1e3 * a.max << ", unregistered " << 1e3 * before.mean << "), "
+                          << sorted[sorted.size() / 2] << " ms/frame\n";
+            }
+      }
+    }
   } catch (const std::exception& e) {
     std::cerr << "register_bench: " << e.what() << "\n";
     return 1;

@@ -1,0 +1,41 @@
+// How the registered model answers a force it was not told of, ROS-free: the stiffness
+// A = K + the springs' stiffness at the model's current state, factorised once (CHOLMOD), and
+// displacements A^-1 F for blocks of forces. The registration's analyses use it: which
+// candidate supports the clouds call for (registration.h) and how far to trust each target
+// (target_uncertainty.h). Static: no mass term, whatever the scene's mode.
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "liver_sim/cholmod_solver.h"
+#include "liver_sim/liver_model.h"
+
+namespace liver_sim {
+
+class StateCompliance {
+ public:
+  // Analyses the model's matrix pattern (once per mesh).
+  explicit StateCompliance(LiverModel& model);
+
+  // Assembles and factorises A at the model's current positions and springs. Throws
+  // std::runtime_error when A is not positive definite.
+  void factorize();
+  // Displacements (columns, m) under forces (columns, N), zero at the supports (forces there
+  // are ignored). Needs factorize().
+  void solve(const Eigen::MatrixXd& forces, Eigen::MatrixXd& displacements);
+  // The tissue's internal forces (N) at the factorised state.
+  const Eigen::VectorXd& internal_forces() const { return internal_; }
+  // The positions the factor was made at.
+  const Eigen::VectorXd& state() const { return state_; }
+  LiverModel& model() { return model_; }
+
+ private:
+  LiverModel& model_;
+  CholmodSolver factor_;
+  std::vector<double> values_;
+  Eigen::VectorXd internal_, state_;
+  Eigen::MatrixXd free_forces_;
+};
+
+}  // namespace liver_sim

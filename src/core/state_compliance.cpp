@@ -1,0 +1,30 @@
+#include "liver_sim/state_compliance.h"
+
+#include <stdexcept>
+
+namespace liver_sim {
+
+StateCompliance::StateCompliance(LiverModel& model) : model_(model) {
+  const SparsePattern& pattern = model.mechanics().pattern();
+  factor_.analyze(pattern.rows(), pattern.column_start(), pattern.row_index());
+}
+
+void StateCompliance::factorize() {
+  MechanicalModel& m = model_.mechanics();
+  state_ = model_.positions();
+  m.internal_forces(state_, internal_);  // also the element rotations the tangent is taken at
+  m.assemble(1.0, 0.0, values_);
+  if (!factor_.factorize(values_))
+    throw std::runtime_error("the registered model's stiffness is not positive definite");
+}
+
+void StateCompliance::solve(const Eigen::MatrixXd& forces, Eigen::MatrixXd& displacements) {
+  // A has identity rows and columns at the supports: zero forces there give zero displacements.
+  free_forces_ = forces;
+  const std::vector<char>& fixed = model_.mechanics().fixed_dofs();
+  for (int i = 0; i < free_forces_.rows(); ++i)
+    if (fixed[i]) free_forces_.row(i).setZero();
+  factor_.solve(free_forces_, displacements);
+}
+
+}  // namespace liver_sim
