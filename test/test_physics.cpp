@@ -1,12 +1,15 @@
 // Physics against references the code does not produce: large-deformation closed forms, the
 // beam element against the textbook beam, vibration against the closed-form eigenfrequency and
-// backward Euler's known dissipation, and the torque of a contact. Each test names the mutation of scripts/mutate.py it was seen to kill
+// backward Euler's known dissipation, each rollback detector triggered by an honest input, and
+// the torque of a contact. Each test names the mutation of scripts/mutate.py it was seen to kill
 // (doc/validation.md#mutation-testing).
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
 #include <cmath>
 #include <complex>
+#include <cstdio>
+#include <limits>
 
 #include "liver_sim/corotational_beam.h"
 #include "liver_sim/liver_model.h"
@@ -264,6 +267,109 @@ TEST(NewtonMatrix, OneIterationSolvesALinearDynamicStep) {
     ASSERT_TRUE(r.converged()) << r.message;
     EXPECT_EQ(r.iterations, 1) << "step " << k;
   }
+}
+
+// --- Rollback detectors --------------------------------------------------------------------------
+
+// Each detector, triggered by an input that honestly leads there: the step is rolled back to
+// the exact state before it and says which detector fired.
+StepResult expect_rolled_back(LiverModel& m, const std::string& reason) {
+  const Eigen::VectorXd before = m.positions();
+  const double time = m.time();
+  const StepResult r = m.step();
+  EXPECT_EQ(r.status, StepResult::Status::Diverged) << r.message;
+  EXPECT_EQ(r.message.rfind(reason, 0), 0u) << r.message;
+  EXPECT_EQ((m.positions() - before).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(m.time(), time);
+  return r;
+}
+
+// The aspiration cube on 4 x 4 x 4 hexahedra (320 tetrahedra).
+Scene aspiration_cube() {
+  Scene s = load_scene(std::string(LIVER_SIM_SOURCE_DIR) + "/config/scenes/aspiration_cube.yaml");
+  s.mesh.box_divisions = Eigen::Vector3i(4, 4, 4);
+  return s;
+}
+
+// A load that is not a number (a corrupted pressure reading): caught at the residual, before a
+// factorisation is spent on it.
+// Kills NS8 (NaN passing the check: the step then fails later, at the Newton update).
+TEST(Rollback, NonFiniteLoadIsCaughtAtTheResidual) {
+  Scene s = aspiration_cube();
+  LiverModel m(load_scene_mesh(s), s);
+  ASSERT_TRUE(m.step().converged());
+  m.set_load_scale(std::numeric_limits<double>::quiet_NaN());
+  expect_rolled_back(m, "non-finite residual");
+}
+
+// 100 kPa of suction on 3.5 kPa tissue in one full-Newton step without line search: the
+// linear step stretches the top several times its size, the follower load grows with the area
+// and the residual with it, a millionfold within a few iterations. The detector fires at the
+// first iterate past a millionfold: allowed one iteration fewer, the step ends at the cap below
+// that (reported as a stall, whose message gives the merit then and at the start).
+// Kills NS9 (the threshold a million times higher: the step runs on).
+TEST(Rollback, FullNewtonStepsWithoutLineSearchBlowUp) {
+  Scene s = aspiration_cube();
+  s.loads[0].pressure = -1e5;
+  s.solver.strategy = SolverOptions::Strategy::FullNewton;
+  s.solver.line_search = false;
+  LiverModel m(load_scene_mesh(s), s);
+  const StepResult r = expect_rolled_back(m, "residual blow-up");
+  ASSERT_GE(r.iterations, 2);
+  s.solver.max_iterations = r.iterations - 1;
+  LiverModel capped(load_scene_mesh(s), s);
+  const StepResult before = capped.step();
+  if (before.status == StepResult::Status::NotConverged) return;  // below the start: no blow-up
+  double merit = 0, start = 0;
+  ASSERT_EQ(std::sscanf(before.message.c_str(), "stalled: residual %lf N after %*d iterations, no lower than the %lf N",
+                        &merit, &start),
+            2)
+      << before.message;
+  EXPECT_LT(merit, 1e6 * start);
+}
+
+// The tangent R K0 R^T (with membranes, beams, springs and mass) is positive semi-definite by
+// construction, whatever the rotations, so an inverted start does not make it indefinite; it is
+// singular only where nothing holds the tissue. A mesh node that no tetrahedron uses (the mesh
+// readers drop such nodes; a mesh built in code can keep one) has no stiffness at all.
+// Kills NS12 (the factorisation's refusal ignored: the step runs on a broken factor).
+TEST(Rollback, UnsupportedNodeMakesTheTangentSingular) {
+  TetMesh mesh = make_box_mesh({0.01, 0.01, 0.01}, {2, 2, 2});
+  mesh.V.conservativeResize(mesh.V.rows() + 1, 3);
+  mesh.V.bottomRows<1>() << 0.02, 0.02, 0.02;
+  Scene s;
+  s.fixed.push_back(box({-1, -1, -1}, {1, 1, kSlack}));
+  LoadOptions gravity;
+  gravity.kind = LoadOptions::Kind::Gravity;
+  gravity.vector = {0, 0, -9.81};
+  s.loads.push_back(gravity);
+  LiverModel m(mesh, s);
+  expect_rolled_back(m, "tangent matrix is not positive definite");
+}
+
+// Real-time frames (one modified-Newton iteration, no line search) started from the
+// constant-acceleration prediction, under a suction that jumps between 20% and 100% every frame:
+// the prediction extrapolates the zig-zag, one iteration does not bring it back, and the third
+// frame ends with 3.6 times the energy it started with while the loads did far less work.
+// Backward Euler cannot gain energy: the frame is rolled back.
+// Kills NS11 (the energy threshold ten times higher).
+TEST(Rollback, CappedFramesThatGainEnergyAreRolledBack) {
+  Scene s = aspiration_cube();
+  s.solver.mode = SolverOptions::Mode::Dynamic;
+  s.solver.dt = 0.01;
+  s.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
+  s.solver.predictor = SolverOptions::Predictor::ConstantAcceleration;
+  s.solver.max_iterations = 1;
+  s.solver.tolerance = 1e-300;
+  s.solver.line_search = false;
+  LiverModel m(load_scene_mesh(s), s);
+  for (int frame = 0; frame < 2; ++frame) {
+    m.set_load_scale(frame % 2 ? 1.0 : 0.2);
+    const StepResult r = m.step();
+    ASSERT_NE(r.status, StepResult::Status::Diverged) << "frame " << frame << ": " << r.message;
+  }
+  m.set_load_scale(0.2);
+  expect_rolled_back(m, "energy growth");
 }
 
 // --- Contact -----------------------------------------------------------------------------------
