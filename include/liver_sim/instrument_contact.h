@@ -167,6 +167,9 @@ class InstrumentContact {
   // The Delassus operator of the contacts in W_, the predicted rows after the update A^-1 r in
   // delta_ and the current forces in lambda_ (contact frames); z_ = L^-1 P r.
   void contact_problem(CholmodSolver& factor, const Eigen::VectorXd& r);
+  // contact_problem, then projected Gauss-Seidel to the force tolerance: the new forces in
+  // lambda_ (contact frames). Returns the sweeps.
+  int solve_contact_problem(CholmodSolver& factor, const Eigen::VectorXd& r, double force_tolerance);
   // The contacts' forces are an update's: kept for scale_update, gathered.
   void keep_update();
   // z_ += the forward half of the contact force changes `change` (3 per contact, world frame).

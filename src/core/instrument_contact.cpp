@@ -415,14 +415,18 @@ double InstrumentContact::gap_tolerance(double force_tolerance) const {
   return std::min(0.01 * options_.tolerance, force_tolerance * compliance);
 }
 
-InstrumentContact::Update InstrumentContact::direct_update(CholmodSolver& factor, const Eigen::VectorXd& r,
-                                                           double force_tolerance, Eigen::VectorXd& dx) {
-  Update update;
+int InstrumentContact::solve_contact_problem(CholmodSolver& factor, const Eigen::VectorXd& r, double force_tolerance) {
   contact_problem(factor, r);
   const ContactSolveResult solved = solve_frictional_contacts(W_, delta_, bilateral_, options_.friction,
                                                               gap_tolerance(force_tolerance), options_.max_iterations, lambda_);
   ++solves_;
-  update.sweeps = solved.sweeps;
+  return solved.sweeps;
+}
+
+InstrumentContact::Update InstrumentContact::direct_update(CholmodSolver& factor, const Eigen::VectorXd& r,
+                                                           double force_tolerance, Eigen::VectorXd& dx) {
+  Update update;
+  update.sweeps = solve_contact_problem(factor, r, force_tolerance);
   change_.resize(contacts_.size());
   for (size_t c = 0; c < contacts_.size(); ++c) {
     change_[c] = contacts_[c].frame * (lambda_.segment<3>(3 * c) - contacts_[c].lambda);
@@ -440,11 +444,7 @@ InstrumentContact::Update InstrumentContact::krylov_update(CholmodSolver& factor
   Update update;
   // 1. The frictional contact problem with the rows predicted after the tangent's update A^-1 r:
   // which contacts separate, stick or slide.
-  contact_problem(factor, r);
-  const ContactSolveResult solved = solve_frictional_contacts(W_, delta_, bilateral_, options_.friction,
-                                                              gap_tolerance(force_tolerance), options_.max_iterations, lambda_);
-  ++solves_;
-  update.sweeps = solved.sweeps;
+  update.sweeps = solve_contact_problem(factor, r, force_tolerance);
 
   // 2. The Newton update for that contact state, on the true Jacobian J:
   //      J dx - B lambda = r_free,   H dx = -rows
