@@ -111,15 +111,12 @@ geometry_msgs::WrenchStamped Node::wrench_;
 visualization_msgs::Marker Node::mesh_;
 unsigned Node::status_count_ = 0, Node::mesh_count_ = 0;
 
-// ~publish_rate is 15 Hz in the test launch. A loose band: this checks that the mesh flows
-// periodically at about the set rate, not how fast the machine is.
-TEST_F(Node, PublishesTheDeformedMeshAtTheSetRate) {
+// The mesh keeps flowing while the model idles (~publish_rate 15 Hz in the test launch; the rate
+// is measured by scripts/measure_contact_node.sh as meshes reflecting poses, not asserted here).
+TEST_F(Node, KeepsPublishingTheDeformedMesh) {
+  settled();
   const unsigned before = mesh_count_;
-  const ros::WallTime start = ros::WallTime::now();
-  wait_for([] { return false; }, 2.0);
-  const double rate = (mesh_count_ - before) / (ros::WallTime::now() - start).toSec();
-  EXPECT_GT(rate, 7.5);
-  EXPECT_LT(rate, 22.5);
+  ASSERT_TRUE(wait_for([before] { return mesh_count_ >= before + 3; }, 10.0)) << "the mesh stopped";
   EXPECT_EQ(mesh_.type, visualization_msgs::Marker::TRIANGLE_LIST);
   EXPECT_EQ(mesh_.header.frame_id, "liver");
   EXPECT_EQ(mesh_.points.size(), 3u * 768u);  // the cube's boundary triangles
