@@ -93,7 +93,7 @@ class InstrumentContact {
   //                                 size, or appearing, is moved there in stages, each solved,
   //                                 so that no surface point is caught deep inside it)
   //   begin_stage(k, stages, x)     the poses of stage k (1-based); slips are measured from x
-  //   detect(x), violation(x), newton_update(...) within the Newton iterations
+  //   detect(x), violation(x), direct_update(...) or krylov_update(...) within the Newton iterations
   //   end_step(rolled_back, x)      the forces of the step's start again when it was rolled
   //                                 back; the reactions at x
   int begin_step(double t, const Eigen::VectorXd& x);

@@ -98,7 +98,8 @@ class NewtonStepper {
   // Line-search merit: the free residual norm and the contact violation, in newtons.
   double merit(double residual_norm, const Eigen::VectorXd& x) const;
   // Newton iterations from the current state; adds to result (iterations, timings, status).
-  void newton(StepResult& result);
+  // contacts_detected: the contacts are already those of the current state.
+  void newton(StepResult& result, bool contacts_detected);
   // Dynamic steps: the mechanical energy (kinetic + elastic) and the work of the loads and of
   // the constraints over the step that ended at x_ (J).
   double mechanical_energy(const Eigen::VectorXd& x, const Eigen::VectorXd& v);

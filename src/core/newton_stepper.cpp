@@ -167,12 +167,14 @@ StepResult NewtonStepper::step() {
     // O(dt^2) or O(dt^3), not O(dt): one iteration of modified Newton then lands 100x closer to
     // the converged step (doc/performance.md). Not when the prediction carries a surface point
     // deep into an instrument (its contact would push it out on the wrong side).
+    bool detected = false;
     if (dynamic && k == 1 && solver_.predictor != SolverOptions::Predictor::None) {
       x_ += solver_.dt * v_;
       if (solver_.predictor == SolverOptions::Predictor::ConstantAcceleration) x_ += solver_.dt * (v_ - v_previous_);
       bool predicted = true;
       if (contact_.num_instruments() > 0) {
         contact_.detect(x_);
+        detected = true;
         if (contact_.deep(x_)) {
           x_ = x_start_;
           contact_.detect(x_);
@@ -186,7 +188,7 @@ StepResult NewtonStepper::step() {
         rotations_predicted = true;
       }
     }
-    newton(result);
+    newton(result, detected);
   }
   if (dynamic && result.status != StepResult::Status::Diverged && result.iterations > 0) {
     // Backward Euler dissipates: the energy cannot exceed what it had plus the work done on it.
@@ -232,7 +234,7 @@ double NewtonStepper::merit(double residual_norm, const Eigen::VectorXd& x) cons
   return std::sqrt(residual_norm * residual_norm + k * k);
 }
 
-void NewtonStepper::newton(StepResult& result) {
+void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
   auto fail = [&](const std::string& why) {
     result.status = StepResult::Status::Diverged;
     result.message = why;
@@ -244,7 +246,7 @@ void NewtonStepper::newton(StepResult& result) {
   bool refreshed = false;  // a modified-Newton iteration on an old factor was redone on a new one
   auto t0 = Clock::now();
   double reference = 0;
-  contact_.detect(x_);
+  if (!contacts_detected) contact_.detect(x_);
   double norm = residual(x_, r_, &reference);
   const double start_merit = merit(norm, x_);
   result.timing.assembly_ms += ms_since(t0);
