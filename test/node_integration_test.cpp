@@ -10,6 +10,7 @@
 #include <tf2_ros/static_transform_broadcaster.h>
 #include <visualization_msgs/Marker.h>
 
+#include <Eigen/Core>
 #include <cmath>
 #include <functional>
 
@@ -112,6 +113,24 @@ visualization_msgs::Marker Node::mesh_;
 unsigned Node::status_count_ = 0, Node::mesh_count_ = 0;
 
 // The mesh keeps flowing while the model idles (~publish_rate 15 Hz in the test launch; the rate
+// A cloud of n points in frame liver, point i at point(i) (m).
+template <typename Point>
+sensor_msgs::PointCloud2 xyz_cloud(int n, const Point& point) {
+  sensor_msgs::PointCloud2 cloud;
+  cloud.header.frame_id = "liver";
+  sensor_msgs::PointCloud2Modifier mod(cloud);
+  mod.setPointCloud2FieldsByString(1, "xyz");
+  mod.resize(n);
+  sensor_msgs::PointCloud2Iterator<float> x(cloud, "x");
+  for (int i = 0; i < n; ++i, ++x) {
+    const Eigen::Vector3f p = point(i);
+    x[0] = p.x();
+    x[1] = p.y();
+    x[2] = p.z();
+  }
+  return cloud;
+}
+
 // is measured by scripts/measure_contact_node.sh as meshes reflecting poses, not asserted here).
 TEST_F(Node, KeepsPublishingTheDeformedMesh) {
   settled();
@@ -207,31 +226,15 @@ TEST_F(Node, MalformedInputIsRefusedAndCountedWhileTheNodeRuns) {
   EXPECT_NEAR(status_.max_displacement, before.max_displacement, 1e-12) << "refused input changed the model";
   EXPECT_EQ(status_.clouds_registered, before.clouds_registered);
   // Ten points on a line are too few to act (registration.min_points): refused.
-  sensor_msgs::PointCloud2 line;
-  line.header.frame_id = "liver";
-  sensor_msgs::PointCloud2Modifier line_mod(line);
-  line_mod.setPointCloud2FieldsByString(1, "xyz");
-  line_mod.resize(10);
-  sensor_msgs::PointCloud2Iterator<float> lx(line, "x");
-  for (int i = 0; i < 10; ++i, ++lx) lx[0] = lx[1] = lx[2] = 0.001f * i;
-  cloud_pub_.publish(line);
+  cloud_pub_.publish(xyz_cloud(10, [](int i) { return Eigen::Vector3f::Constant(0.001f * i); }));
   ASSERT_TRUE(refused(5)) << "ten points: " << status_.text;
   EXPECT_NE(status_.text.find("min_points"), std::string::npos) << status_.text;
   EXPECT_EQ(status_.clouds_registered, before.clouds_registered);
   // A cloud of the cube's top face (a sixth of its surface, 100 points 1.5 mm apart) is
   // registered and not counted as refused.
-  sensor_msgs::PointCloud2 cloud;
-  cloud.header.frame_id = "liver";
-  sensor_msgs::PointCloud2Modifier mod(cloud);
-  mod.setPointCloud2FieldsByString(1, "xyz");
-  mod.resize(100);
-  sensor_msgs::PointCloud2Iterator<float> x(cloud, "x");
-  for (int i = 0; i < 100; ++i, ++x) {
-    x[0] = 0.00075f + 0.0015f * (i % 10);
-    x[1] = 0.00075f + 0.0015f * (i / 10);
-    x[2] = 0.0151f;
-  }
-  cloud_pub_.publish(cloud);
+  cloud_pub_.publish(xyz_cloud(100, [](int i) {
+    return Eigen::Vector3f(0.00075f + 0.0015f * (i % 10), 0.00075f + 0.0015f * (i / 10), 0.0151f);
+  }));
   ASSERT_TRUE(wait_for([&] { return status_.clouds_registered == before.clouds_registered + 1; }, 10.0)) << status_.text;
   const unsigned count = status_count_;
   ASSERT_TRUE(wait_for([&] { return status_count_ > count + 5; }, 10.0)) << "status stopped flowing";

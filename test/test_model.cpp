@@ -55,10 +55,7 @@ TEST(ModelAnalytic, ColumnUnderGravityMatchesClosedForm) {
   Scene s = block_scene(E, 0.0);
   s.parenchyma.density = rho;
   s.fixed.push_back(box({-1, -1, -1}, {1, 1, 0}));
-  LoadOptions grav;
-  grav.kind = LoadOptions::Kind::Gravity;
-  grav.vector = {0, 0, -g};
-  s.loads.push_back(grav);
+  s.loads.push_back(LoadOptions::gravity({0, 0, -g}));
   s.probes.push_back({"top", {0.0, 0.0, L}});
   s.probes.push_back({"mid", {0.0, 0.0, L / 2}});
   LiverModel m(make_box_mesh({0.01, 0.01, L}, {2, 2, 6}), s);
@@ -400,10 +397,7 @@ TEST_P(SofaLiver, HangsUnderGravityWithCapsuleAndVessels) {
   // Attachment: the top 15% of the organ.
   s.fixed.push_back(box({lo.x() - 1, lo.y() - 1, hi.z() - 0.15 * (hi.z() - lo.z())},
                         {hi.x() + 1, hi.y() + 1, hi.z() + 1}));
-  LoadOptions grav;
-  grav.kind = LoadOptions::Kind::Gravity;
-  grav.vector = {0, 0, -9.81};
-  s.loads.push_back(grav);
+  s.loads.push_back(LoadOptions::gravity({0, 0, -9.81}));
   s.solver.tolerance = 1e-8;
   VesselOptions v;
   v.name = "portal";

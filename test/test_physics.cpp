@@ -251,7 +251,6 @@ TEST(Vibration, RayleighDampingDecaysEachModeAtItsRate) {
   EXPECT_NEAR(s.real(), -c / 2, 1e-4 * c);
 }
 
-// For a linear problem (the rod at strains of 1e-7) the Newton matrix (1 + b/dt) K +
 // Ten steps of the linear rod released from a tiny stretch, to the tolerance 1e-9: each must
 // converge within `iterations`.
 void expect_linear_steps_within(SolverOptions::Strategy strategy, bool line_search, int iterations) {
@@ -268,6 +267,7 @@ void expect_linear_steps_within(SolverOptions::Strategy strategy, bool line_sear
   }
 }
 
+// For a linear problem (the rod at strains of 1e-7) the Newton matrix (1 + b/dt) K +
 // (1/dt^2 + a/dt) M is the exact Jacobian of the backward-Euler residual, so full Newton solves
 // every step in one iteration to the tolerance 1e-9; a wrong matrix converges linearly and
 // needs many.
@@ -374,10 +374,7 @@ TEST(Rollback, UnsupportedNodeMakesTheTangentSingular) {
   mesh.V.bottomRows<1>() << 0.02, 0.02, 0.02;
   Scene s;
   s.fixed.push_back(box({-1, -1, -1}, {1, 1, kSlack}));
-  LoadOptions gravity;
-  gravity.kind = LoadOptions::Kind::Gravity;
-  gravity.vector = {0, 0, -9.81};
-  s.loads.push_back(gravity);
+  s.loads.push_back(LoadOptions::gravity({0, 0, -9.81}));
   LiverModel m(mesh, s);
   expect_rolled_back(m, "tangent matrix is not positive definite");
 }

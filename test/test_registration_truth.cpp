@@ -310,10 +310,7 @@ Scene cantilever(double young_modulus) {
   s.solver.tolerance = 1e-11;
   s.solver.max_iterations = 50;
   s.fixed.push_back(box({-1, -1, -1}, {1e-9, 1, 1}));
-  LoadOptions g;
-  g.kind = LoadOptions::Kind::Gravity;
-  g.vector = Eigen::Vector3d(0, 0, -9.81);
-  s.loads.push_back(g);
+  s.loads.push_back(LoadOptions::gravity({0, 0, -9.81}));
   s.probes.push_back({"tip", Eigen::Vector3d(0.037, 0.005, 0.005)});
   s.probes.push_back({"middle", Eigen::Vector3d(0.021, 0.004, 0.006)});
   return s;
@@ -403,10 +400,7 @@ struct Beam {
     model_scene.solver.tolerance = 1e-10;
     model_scene.solver.max_iterations = 60;
     model_scene.fixed.push_back(box({-1, -1, -1}, {1e-9, 1, 1}));
-    LoadOptions g;
-    g.kind = LoadOptions::Kind::Gravity;
-    g.vector = Eigen::Vector3d(0, 0, -9.81);
-    model_scene.loads.push_back(g);
+    model_scene.loads.push_back(LoadOptions::gravity({0, 0, -9.81}));
     model_scene.probes.push_back({"middle", Eigen::Vector3d(0.06, 0.01, 0.005)});
     RegistrationOptions& r = model_scene.registration;
     r.voxel_size = 0;

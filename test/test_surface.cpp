@@ -483,10 +483,7 @@ TEST(VolumeMeshing, GeneratedMeshConvergesUnderGravity) {
   scene.capsule.young_modulus = 3e6;
   scene.capsule.thickness = 93e-6;
   scene.fixed.push_back(bare_area(s));
-  LoadOptions gravity;
-  gravity.kind = LoadOptions::Kind::Gravity;
-  gravity.vector = {0, 9.81, 0};
-  scene.loads.push_back(gravity);
+  scene.loads.push_back(LoadOptions::gravity({0, 9.81, 0}));
   scene.solver.max_iterations = 50;
   scene.solver.tolerance = 1e-8;
   double volume = 0;

@@ -53,12 +53,20 @@ struct LoadOptions {
   double pressure = 0.0;                          // Pa
   Eigen::Vector3d vector = Eigen::Vector3d::Zero();  // m/s^2 (gravity) or N (force)
   std::optional<Region> region;                   // all boundary triangles if unset (pressure)
+
+  static LoadOptions gravity(const Eigen::Vector3d& acceleration) {  // m/s^2
+    LoadOptions g;
+    g.kind = Kind::Gravity;
+    g.vector = acceleration;
+    return g;
+  }
 };
 
 struct SolverOptions {
   enum class Mode { Static, Dynamic };
-  // How each Newton iteration solves for its update (doc/performance.md). With
-  // instrument contacts the step uses NewtonKrylov, whose factor the contact solver needs.
+  // How each Newton iteration solves for its update (doc/performance.md). With instrument
+  // contacts, ModifiedNewton and FullNewton carry the contact forces in their direct solve; the
+  // others use NewtonKrylov with the contact rows.
   enum class Strategy {
     NewtonKrylov,     // GMRES on the true Jacobian, an earlier CHOLMOD factor as preconditioner
     FullNewton,       // the tangent refactorised (CHOLMOD) and solved directly every iteration

@@ -383,8 +383,7 @@ class Reader {
       if (node["region"]) l.region = region(node["region"], key + ".region");
     } else if (type == "gravity") {
       check_keys(node, key, {"type", "acceleration"});
-      l.kind = LoadOptions::Kind::Gravity;
-      l.vector = vec3(required(node, key, "acceleration"), key + ".acceleration");
+      l = LoadOptions::gravity(vec3(required(node, key, "acceleration"), key + ".acceleration"));
     } else {
       check_keys(node, key, {"type", "total", "region"});
       l.kind = LoadOptions::Kind::Force;
