@@ -517,7 +517,7 @@ class LiverSimNode {
       // A refusal or an event is told in the next status only: later ones say how the model is.
       std::lock_guard<std::mutex> lock(mutex_);
       s.rejected_inputs = rejected_;
-      s.text = r.message.empty() ? fresh_text_ : r.message;
+      s.text = r.message.empty() ? fresh_text_ : fresh_text_.empty() ? r.message : r.message + "; " + fresh_text_;
       fresh_text_.clear();
     }
     status_pub_.publish(s);
