@@ -253,8 +253,7 @@ TEST_F(Reconfigure, StalePosesHoldOrWithdraw) {
   wait_for([] { return false; }, 2.0);
   EXPECT_TRUE(has_tool()) << "held";
   set({}, {}, {}, {{"hold_stale_instruments", false}});
-  press(0.0075, 0.0075, 0.001);
-  EXPECT_TRUE(wait_for([&] { return !has_tool(); }, 10.0)) << "withdrawn 0.5 s after the last pose";
+  EXPECT_TRUE(wait_for([&] { return !has_tool(); }, 10.0)) << "the held tool withdrawn once holding is off";
 }
 
 }  // namespace

@@ -148,20 +148,13 @@ class LiverSimNode {
     align_srv_ = pnh.advertiseService("align_rigidly", &LiverSimNode::on_align_rigidly, this);
     updater_.setHardwareID("liver_sim");
     updater_.add("liver model", this, &LiverSimNode::diagnose);
-    // Live tuning: the server starts from the node's values, so that connecting changes nothing.
+    // Live tuning: the server starts from the node's values, within the config's bounds (a value
+    // outside them is clamped now, not at the first unrelated change).
+    pose_timeout_ = instruments.pose_timeout;
+    hold_stale_ = instruments.hold_stale;
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<LiverSimConfig>>(reconfigure_mutex_, pnh);
-    LiverSimConfig config;
-    config.strategy = strategy_word(model_->solver_options().strategy);
-    config.max_iterations = model_->solver_options().max_iterations;
-    config.tolerance = model_->solver_options().tolerance;
-    config.rate = rate_;
-    config.publish_rate = publish_rate_;
-    config.friction = model_->contact().options().friction;
-    config.registration_stiffness = registration_->options().stiffness;
-    config.color_scale_max = color_scale_max_;
-    config.surface_alpha = surface_alpha_;
-    config.pose_timeout = instruments.pose_timeout;
-    config.hold_stale_instruments = instruments.hold_stale;
+    LiverSimConfig config = current_config();
+    config.__clamp__();
     reconfigure_->updateConfig(config);
     reconfigure_->setCallback([this](LiverSimConfig& c, uint32_t) {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -272,6 +265,7 @@ class LiverSimNode {
       covariances_.clear();
       analysis_due_ = false;
       steps_ = 0;
+      reflected_stamp_ = ros::Time();
     }
     if (capsule) {
       const std::string error = model_->set_capsule(*capsule);  // validated already
@@ -280,35 +274,64 @@ class LiverSimNode {
     }
     if (config) changed |= reconfigure(*config, loop);
     if (instruments_->apply(*model_)) {
-      reflected_stamp_ = instruments_->reflected_stamp();
+      if (!instruments_->reflected_stamp().isZero()) reflected_stamp_ = instruments_->reflected_stamp();
       changed = true;
     }
     return changed;
   }
 
-  // A dynamic_reconfigure change (bounded by the config's limits); true when the model changed.
+  // The values in force, as dynamic_reconfigure shows them.
+  LiverSimConfig current_config() const {
+    LiverSimConfig config;
+    config.strategy = strategy_word(model_->solver_options().strategy);
+    config.max_iterations = model_->solver_options().max_iterations;
+    config.tolerance = model_->solver_options().tolerance;
+    config.rate = rate_;
+    config.publish_rate = publish_rate_;
+    config.friction = model_->contact().options().friction;
+    config.registration_stiffness = registration_->options().stiffness;
+    config.color_scale_max = color_scale_max_;
+    config.surface_alpha = surface_alpha_;
+    config.pose_timeout = pose_timeout_;
+    config.hold_stale_instruments = hold_stale_;
+    return config;
+  }
+
+  // A dynamic_reconfigure change (bounded by the config's limits): all of it, or nothing when the
+  // model refuses a part (the server then shows the values in force). True when the model changed.
   bool reconfigure(const LiverSimConfig& c, ros::WallRate& loop) {
-    SolverOptions solver = model_->solver_options();
+    const SolverOptions solver_before = model_->solver_options();
+    const ContactOptions contact_before = model_->contact().options();
+    const double stiffness_before = registration_->options().stiffness;
+    SolverOptions solver = solver_before;
     solver.strategy = parse_strategy(c.strategy).value_or(solver.strategy);
     solver.max_iterations = c.max_iterations;
     solver.tolerance = c.tolerance;
-    ContactOptions contact = model_->contact().options();
+    ContactOptions contact = contact_before;
     contact.friction = c.friction;
-    const bool model_changed = solver.strategy != model_->solver_options().strategy ||
-                               solver.max_iterations != model_->solver_options().max_iterations ||
-                               solver.tolerance != model_->solver_options().tolerance ||
-                               contact.friction != model_->contact().options().friction;
     std::string error = model_->set_solver_options(solver);
     if (error.empty()) error = model_->set_contact_options(contact);
     if (error.empty()) error = registration_->set_stiffness(c.registration_stiffness);
-    if (!error.empty()) reject("reconfigure: " + error);
+    if (!error.empty()) {
+      model_->set_solver_options(solver_before);
+      model_->set_contact_options(contact_before);
+      registration_->set_stiffness(stiffness_before);
+      reject("reconfigure: " + error);
+      reconfigure_->updateConfig(current_config());
+      return false;
+    }
+    const bool model_changed = solver.strategy != solver_before.strategy ||
+                               solver.max_iterations != solver_before.max_iterations ||
+                               solver.tolerance != solver_before.tolerance || contact.friction != contact_before.friction;
     if (c.rate != rate_) loop = ros::WallRate(c.rate);
     rate_ = c.rate;
     publish_rate_ = c.publish_rate;
     display_due_ |= color_scale_max_ != c.color_scale_max || surface_alpha_ != c.surface_alpha;
     color_scale_max_ = c.color_scale_max;
     surface_alpha_ = c.surface_alpha;
-    instruments_->set_staleness(c.pose_timeout, c.hold_stale_instruments);
+    pose_timeout_ = c.pose_timeout;
+    hold_stale_ = c.hold_stale_instruments;
+    instruments_->set_staleness(pose_timeout_, hold_stale_);
     ROS_INFO("liver_sim: reconfigured: %s, %d iterations a frame, tolerance %g, %g Hz, friction %g",
              c.strategy.c_str(), c.max_iterations, c.tolerance, c.rate, c.friction);
     return model_changed;
@@ -651,6 +674,8 @@ class LiverSimNode {
   std::unique_ptr<RosInstruments> instruments_;
   std::string frame_id_;
   double rate_, publish_rate_, color_scale_max_, surface_alpha_;
+  double pose_timeout_ = 1.0;  // s, as the instruments have it
+  bool hold_stale_ = false;
   ros::Publisher mesh_pub_, vessel_pub_, status_pub_, target_marker_pub_, target_pose_pub_;
   ros::Publisher covariance_pub_, ellipsoid_pub_;
   std::unique_ptr<SurfaceRegistration> registration_;

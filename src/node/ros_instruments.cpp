@@ -8,6 +8,7 @@
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+#include <tuple>
 
 namespace liver_sim {
 namespace {
@@ -27,6 +28,14 @@ std::optional<InstrumentOptions::Type> parse_type(const std::string& s) {
                  InstrumentOptions::Type::Grasper})
     if (s == type_name(t)) return t;
   return std::nullopt;
+}
+
+// A tf frame's or a scene instrument's name as a topic name (instruments/<name>/pose).
+std::string topic_name(const std::string& name) {
+  std::string s = name;
+  for (char& c : s)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_')) c = '_';
+  return s;
 }
 
 // Names become topic names (instruments/<name>/pose).
@@ -89,18 +98,17 @@ RosInstruments::RosInstruments(ros::NodeHandle& nh, ros::NodeHandle& pnh, tf2_ro
   wrench_pub_ = pnh_.advertise<geometry_msgs::WrenchStamped>("wrench", 10);
   marker_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("instruments", 1, true);
   std::lock_guard<std::mutex> lock(mutex_);
+  // The scene's instruments keep their names in the model; ROS knows them by topic names.
   for (int i = 0; i < model.num_instruments(); ++i) {
-    Tracked& t = track(model.instrument(i).name, model.instrument(i), "");
+    const std::string name = topic_name(model.instrument(i).name).substr(0, 32);
+    if (tracked_.count(name)) throw std::invalid_argument("scene instruments '" + name + "': two names give one topic name");
+    Tracked& t = track(name, model.instrument(i), "");
     t.index = i;
     t.shape_changed = false;
   }
-  std::vector<std::pair<std::string, std::string>> declared = {{"tool", ""}};
-  for (const std::string& frame : settings_.frames) {
-    std::string name = frame;
-    for (char& c : name)
-      if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_')) c = '_';
-    declared.emplace_back(name, frame);
-  }
+  std::vector<std::pair<std::string, std::string>> declared;
+  if (!tracked_.count("tool")) declared.emplace_back("tool", "");  // a scene's own `tool` takes the name
+  for (const std::string& frame : settings_.frames) declared.emplace_back(topic_name(frame), frame);
   for (const auto& [name, frame] : declared) {
     const std::string error = name_error(name);
     if (!error.empty()) throw std::invalid_argument("~instrument_frames: " + error);
@@ -137,16 +145,20 @@ std::string RosInstruments::merge(const InstrumentCommand& c, InstrumentOptions&
     declared.enabled = false;  // until its first pose
     shape = declared;
   }
-  const std::pair<const char*, double> sizes[] = {
-      {"radius", c.radius}, {"length", c.length}, {"inner_radius", c.inner_radius}, {"outer_radius", c.outer_radius}};
-  for (const auto& [field, value] : sizes)
-    if (!std::isfinite(value) || value < 0) return k + field + " must be finite and > 0 (0 keeps the current value)";
+  // Bounds of the message (InstrumentCommand.msg): an instrument of the abdomen, not of a building.
+  const std::tuple<const char*, double, double> sizes[] = {{"radius", c.radius, 0.05},
+                                                           {"length", c.length, 0.5},
+                                                           {"inner_radius", c.inner_radius, 0.05},
+                                                           {"outer_radius", c.outer_radius, 0.05}};
+  for (const auto& [field, value, most] : sizes)
+    if (!std::isfinite(value) || value < 0 || value > most)
+      return k + field + " must be in (0, " + std::to_string(most).substr(0, 4) + "] m (0 keeps the current value)";
   if (c.radius > 0) shape.radius = c.radius;
   if (c.length > 0) shape.length = c.length;
   if (c.inner_radius > 0) shape.inner_radius = c.inner_radius;
   if (c.outer_radius > 0) shape.outer_radius = c.outer_radius;
   if (shape.type == Type::Tube) {
-    if (!std::isfinite(c.suction) || c.suction < 0) return k + "suction must be finite and >= 0 Pa";
+    if (!std::isfinite(c.suction) || c.suction < 0 || c.suction > 1e5) return k + "suction must be in [0, 1e5] Pa";
     shape.suction = c.suction;
   }
   if (shape.type == Type::Grasper) shape.closed = c.grasp;
@@ -168,6 +180,7 @@ void RosInstruments::on_command(const InstrumentCommand::ConstPtr& msg) {
       return reject_("instrument_command " + c.name + ": frame '" + c.frame + "' unknown to tf (" + error + ")");
     error.clear();
   }
+  std::optional<Tracked> dropped;  // destroyed after the lock: its subscriber waits for its callbacks
   std::unique_lock<std::mutex> lock(mutex_);
   const auto it = tracked_.find(c.name);
   const bool exists = it != tracked_.end() && !it->second.removed;
@@ -184,23 +197,29 @@ void RosInstruments::on_command(const InstrumentCommand::ConstPtr& msg) {
   for (const auto& [name, t] : tracked_) count += !t.removed;
   if (!exists && count >= kMaxInstruments) error = "at most " + std::to_string(kMaxInstruments) + " instruments";
   InstrumentOptions shape = exists ? it->second.shape : InstrumentOptions{};
-  shape.name = c.name;
+  if (!exists) shape.name = c.name;  // an existing one keeps its name in the model
   if (error.empty()) error = merge(c, shape);
   if (!error.empty()) {
     lock.unlock();
     return reject_(error.rfind("instrument_command", 0) == 0 ? error : "instrument_command " + c.name + ": " + error);
   }
   if (!exists) {
-    if (it != tracked_.end()) tracked_.erase(it);  // removed, not yet applied: declared anew
+    if (it != tracked_.end()) {  // removed, not yet applied: declared anew
+      if (it->second.index >= 0) retired_.push_back(it->second.index);
+      dropped = std::move(it->second);
+      tracked_.erase(it);
+    }
     track(c.name, shape, c.frame);
     return;
   }
   Tracked& t = it->second;
   t.shape = shape;
   t.shape_changed = true;
-  if (!c.frame.empty() && c.frame != t.frame) {
-    t.frame = c.frame;
-    t.pose.reset();  // until the frame's first lookup
+  // A declaration sets the pose source (empty frame: the topic); a change keeps it unless named.
+  const std::string frame = c.type.empty() && c.frame.empty() ? t.frame : c.frame;
+  if (frame != t.frame) {
+    t.frame = frame;
+    t.pose.reset();  // until the new source's first pose
     t.pose_changed = true;
   }
 }
@@ -209,18 +228,19 @@ void RosInstruments::on_pose(const std::string& name, const geometry_msgs::PoseS
   const std::string topic = "instruments/" + name + "/pose";
   if (!finite(msg->pose)) return reject_(topic + ": NaN or infinite values");
   geometry_msgs::PoseStamped p = *msg;
+  // An orientation left at zeros (unset) is the identity: the instrument points up its frame's z.
+  auto& o = p.pose.orientation;
+  if (o.x == 0 && o.y == 0 && o.z == 0 && o.w == 0) o.w = 1;
+  if (!(std::abs(Eigen::Vector4d(o.x, o.y, o.z, o.w).norm() - 1) < 1e-3))
+    return reject_(topic + ": orientation is not a unit quaternion");
   if (!p.header.frame_id.empty() && p.header.frame_id != settings_.frame_id) {
     try {
-      p = tf_.transform(*msg, settings_.frame_id, ros::Duration(settings_.tf_timeout));
+      p = tf_.transform(p, settings_.frame_id, ros::Duration(settings_.tf_timeout));
     } catch (const tf2::TransformException& e) {
       return reject_(topic + " in frame '" + msg->header.frame_id + "': " + e.what());
     }
   }
-  // An orientation left at zeros (unset) is the identity: the instrument points up the frame's z.
-  const auto& o = p.pose.orientation;
-  Eigen::Quaterniond q(o.w, o.x, o.y, o.z);
-  if (q.coeffs().isZero(0.0)) q.setIdentity();
-  if (!(std::abs(q.norm() - 1) < 1e-3)) return reject_(topic + ": orientation is not a unit quaternion");
+  const Eigen::Quaterniond q = Eigen::Quaterniond(o.w, o.x, o.y, o.z).normalized();
   std::unique_lock<std::mutex> lock(mutex_);
   const auto it = tracked_.find(name);
   if (it == tracked_.end() || it->second.removed) return;
@@ -249,8 +269,14 @@ void RosInstruments::lookup_frame(const std::string& name, Tracked& t) {
     const geometry_msgs::TransformStamped s = tf_.lookupTransform(settings_.frame_id, t.frame, ros::Time(0));
     const Eigen::Isometry3d pose = to_eigen(s.transform);
     if (!pose.matrix().allFinite()) return reject_("instrument " + name + ": non-finite transform of " + t.frame);
-    // A static frame (stamp zero) never goes stale.
-    if (!t.pose || t.received != s.header.stamp || s.header.stamp.isZero()) set_pose(t, pose, s.header.stamp, s.header.stamp);
+    // A static frame (stamp zero) never goes stale; a moving one ages from when its transform
+    // last advanced, on this computer's clock (the tracker's may differ).
+    if (s.header.stamp.isZero()) {
+      set_pose(t, pose, s.header.stamp, ros::Time());
+    } else if (!t.pose || s.header.stamp != t.tf_stamp) {
+      t.tf_stamp = s.header.stamp;
+      set_pose(t, pose, s.header.stamp, ros::Time::now());
+    }
   } catch (const tf2::TransformException& e) {
     ROS_WARN_THROTTLE(5.0, "liver_sim: instrument %s, frame %s: %s", name.c_str(), t.frame.c_str(), e.what());
   }
@@ -263,15 +289,18 @@ int RosInstruments::model_slot(LiverModel& model, const InstrumentOptions& shape
 }
 
 bool RosInstruments::apply(LiverModel& model) {
+  std::vector<Tracked> dropped;  // destroyed after the lock: a subscriber waits for its callbacks
   std::lock_guard<std::mutex> lock(mutex_);
   bool changed = false;
+  reflected_stamp_ = ros::Time();
   const ros::Time now = ros::Time::now();
   for (auto it = tracked_.begin(); it != tracked_.end();) {
     const std::string& name = it->first;
     Tracked& t = it->second;
     if (t.removed) {
       if (t.index >= 0) retired_.push_back(t.index);
-      it = tracked_.erase(it);  // its subscriber and publisher with it
+      dropped.push_back(std::move(t));
+      it = tracked_.erase(it);
       continue;
     }
     if (!t.frame.empty()) lookup_frame(name, t);
@@ -311,7 +340,7 @@ bool RosInstruments::apply(LiverModel& model) {
       }
       if (t.index >= 0 && t.index != slot) retired_.push_back(t.index);  // retyped
       t.index = slot;
-      if (t.pose && !t.stamp.isZero() && t.stamp > reflected_stamp_) reflected_stamp_ = t.stamp;
+      if (t.pose_changed && t.pose && t.stamp > reflected_stamp_) reflected_stamp_ = t.stamp;
       changed = true;
       markers_due_ = true;
     } catch (const std::invalid_argument& e) {
@@ -348,6 +377,8 @@ void RosInstruments::release_all(LiverModel& model) {
 void RosInstruments::set_staleness(double pose_timeout, bool hold_stale) {
   std::lock_guard<std::mutex> lock(mutex_);
   settings_.pose_timeout = pose_timeout;
+  if (settings_.hold_stale != hold_stale)
+    for (auto& [name, t] : tracked_) t.pose_changed |= t.stale;  // held ones withdrawn, or back
   settings_.hold_stale = hold_stale;
 }
 
@@ -359,10 +390,14 @@ void RosInstruments::publish(const LiverModel& model, const std_msgs::Header& he
   std::lock_guard<std::mutex> lock(mutex_);
   Eigen::Vector3d force = Eigen::Vector3d::Zero(), torque = Eigen::Vector3d::Zero();
   std::vector<geometry_msgs::TransformStamped> tips;
-  for (const auto& [name, t] : tracked_) {
+  for (auto& [name, t] : tracked_) {
     if (t.index < 0) continue;
     const InstrumentReaction& r = model.instrument_reaction(t.index);
     const Eigen::Isometry3d& P = model.instrument_pose(t.index);
+    if (P.matrix() != t.drawn.matrix()) {  // a scene trajectory moves it too
+      t.drawn = P;
+      markers_due_ = true;
+    }
     force += r.force;
     torque += r.torque + P.translation().cross(r.force);
     geometry_msgs::WrenchStamped w;

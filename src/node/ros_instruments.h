@@ -47,7 +47,7 @@ class RosInstruments {
   // Simulation thread. Moves staged declarations, poses and tf frames into the model, withdraws
   // (or holds) stale instruments; true when the model's instruments changed.
   bool apply(LiverModel& model);
-  // The stamp of the newest pose applied (zero before the first): what the model reflects.
+  // The stamp of the newest pose the last apply() moved into the model (zero: none).
   ros::Time reflected_stamp() const { return reflected_stamp_; }
   // Every instrument out of the scene until its next pose (a reset).
   void release_all(LiverModel& model);
@@ -69,9 +69,11 @@ class RosInstruments {
     std::optional<Eigen::Isometry3d> pose;  // the latest pose (model frame); none: not posed by ROS
     bool pose_changed = false;
     ros::Time stamp;                // of the latest pose
-    ros::Time received;             // ROS time the latest pose came (tf: its stamp; zero: static)
+    ros::Time received;             // ROS time the latest pose came (zero: a static tf frame)
+    ros::Time tf_stamp;             // of the frame's latest transform
     bool stale = false;
     bool removed = false;
+    Eigen::Isometry3d drawn = Eigen::Isometry3d::Identity();  // the model's pose last published
   };
 
   void on_command(const InstrumentCommand::ConstPtr& msg);
