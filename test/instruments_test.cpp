@@ -83,6 +83,11 @@ class Tracker {
 
 liver_sim::SimulationStatus status;
 std::vector<std::string> texts;  // status texts since the last clear
+
+void on_status_with_text(const liver_sim::SimulationStatus::ConstPtr& m) {
+  status = *m;
+  if (!m->text.empty()) texts.push_back(m->text);
+}
 std::map<std::string, geometry_msgs::WrenchStamped> wrenches;
 geometry_msgs::WrenchStamped total;
 visualization_msgs::MarkerArray markers;
@@ -256,12 +261,7 @@ TEST(Instruments, GrasperAndProbeFromTheirOwnFramesMatchTheCore) {
 // Each refused command names its field, is counted, and changes nothing (no step follows it).
 TEST(Instruments, RefusalsNameTheFieldAndChangeNothing) {
   ros::NodeHandle nh;
-  auto sub = nh.subscribe<liver_sim::SimulationStatus>(
-      "liver_sim/status", 100, boost::function<void(const liver_sim::SimulationStatus::ConstPtr&)>(
-                                   [](const liver_sim::SimulationStatus::ConstPtr& m) {
-                                     status = *m;
-                                     if (!m->text.empty()) texts.push_back(m->text);
-                                   }));
+  auto sub = nh.subscribe("liver_sim/status", 100, on_status_with_text);
   ros::Publisher command = nh.advertise<liver_sim::InstrumentCommand>("instrument_command", 10);
   ASSERT_TRUE(wait_for([&] { return command.getNumSubscribers() > 0 && status.state == "idle"; }, 60.0));
   const liver_sim::SimulationStatus before = status;
@@ -360,12 +360,7 @@ TEST(Instruments, StalePosesWithdrawAndRemovedStaysOut) {
 // With ~instrument_tf_timeout 0 every one of them is refused and this test fails.
 TEST(Instruments, PosesInAMovingTrackerFrameAreAccepted) {
   ros::NodeHandle nh;
-  auto sub = nh.subscribe<liver_sim::SimulationStatus>(
-      "liver_sim/status", 100, boost::function<void(const liver_sim::SimulationStatus::ConstPtr&)>(
-                                   [](const liver_sim::SimulationStatus::ConstPtr& m) {
-                                     status = *m;
-                                     if (!m->text.empty()) texts.push_back(m->text);
-                                   }));
+  auto sub = nh.subscribe("liver_sim/status", 100, on_status_with_text);
   ros::Publisher command = nh.advertise<liver_sim::InstrumentCommand>("instrument_command", 10);
   ros::Publisher pose_pub = nh.advertise<geometry_msgs::PoseStamped>("instruments/needle/pose", 10);
   ASSERT_TRUE(wait_for([&] { return command.getNumSubscribers() > 0 && status.header.stamp.toSec() > 0; }, 60.0));
