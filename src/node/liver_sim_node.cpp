@@ -217,6 +217,7 @@ class LiverSimNode {
     if (reset_requested_) {
       model_->reset();  // also removes the registration's springs
       registration_->clear();
+      reference_.resize(0);
       registering_ = false;
       clouds_registered_ = 0;
       registration_rms_ = 0;
@@ -518,7 +519,10 @@ class LiverSimNode {
     marker_.header.stamp = reflected_stamp_.isZero() ? ros::Time::now() : reflected_stamp_;
     marker_.ns = "liver";
     marker_.id = 0;
-    fill_mesh_marker(*model_, color_scale_max_, surface_alpha_, marker_);
+    // Displacements from the pre-operative equilibrium: the first converged state after start or reset.
+    if (reference_.size() == 0 && last_.converged()) reference_ = model_->positions();
+    fill_mesh_marker(*model_, reference_.size() ? reference_ : model_->positions(), color_scale_max_, surface_alpha_,
+                     marker_);
     mesh_pub_.publish(marker_);
     publish_targets(marker_.header);
     if (model_->num_beams() > 0) {
@@ -584,6 +588,10 @@ class LiverSimNode {
       markers.markers.push_back(m);
       poses.poses.push_back(m.pose);
     }
+    append_target_names(targets, header, markers);
+    const Eigen::MatrixX3d& rest = model_->mesh().V;
+    append_colour_legend(Eigen::AlignedBox3d(rest.colwise().minCoeff().transpose(), rest.colwise().maxCoeff().transpose()),
+                         color_scale_max_, header, markers);
     target_marker_pub_.publish(markers);
     target_pose_pub_.publish(poses);
     if (covariances_.size() != targets.size()) return;  // no analysis since the last reset
@@ -676,6 +684,7 @@ class LiverSimNode {
   std::string state_ = "idle";
   std::deque<ros::WallTime> frame_times_;
   ros::Time reflected_stamp_;
+  Eigen::VectorXd reference_;  // m, 3 #V: the pre-operative equilibrium; empty until known
   uint64_t clouds_registered_ = 0;
   bool registering_ = false;  // the model is converging on the last cloud
   double registration_rms_ = 0;
