@@ -3,7 +3,7 @@
 (launch/or_demo.launch, or scripts/run.sh, which starts both):
 
   0 s   a depth camera in front of and above the liver sends clouds at 5 Hz until the end: the
-        liver in the abdomen lies up to 6 mm higher over the right lobe than the pre-operative
+        liver in the abdomen lies up to 3 mm higher over the right lobe than the pre-operative
         model (a smooth lift), and the node registers the clouds;
   6 s   a grasper closes on the right lobe's lateral edge and lifts it 15 mm (a retraction);
   13 s  a probe presses 5 mm into the right lobe above the tumour, slides 10 mm, withdraws;
@@ -219,8 +219,8 @@ def main():
         tumour_preop = session.targets[0].copy()
     preop = session.triangles()
     centre = preop.reshape(-1, 3).mean(axis=0)
-    # The intra-operative liver the camera sees: up to 6 mm higher over the right lobe.
-    lift = 6e-3 * np.exp(-np.sum((preop[..., :2] - [0.06, -0.03]) ** 2, axis=-1) / (2 * 0.04**2))
+    # The intra-operative liver the camera sees: up to 3 mm higher over the right lobe.
+    lift = 3e-3 * np.exp(-np.sum((preop[..., :2] - [0.06, -0.03]) ** 2, axis=-1) / (2 * 0.04**2))
     truth = preop.copy()
     truth[..., 2] += lift
     camera = Camera(truth, rng)

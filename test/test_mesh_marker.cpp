@@ -134,7 +134,7 @@ TEST(MeshMarker, TargetNamesAndLegend) {
     EXPECT_EQ(m.id, static_cast<int>(i));
     EXPECT_EQ(m.type, visualization_msgs::Marker::TEXT_VIEW_FACING);
     EXPECT_EQ(m.text, targets[i].name);
-    EXPECT_NEAR(m.pose.position.z, targets[i].position.z() + 0.005, 1e-12);
+    EXPECT_NEAR(m.pose.position.z, targets[i].position.z() + 0.004, 1e-12);
     EXPECT_EQ(m.header.frame_id, "liver");
   }
 

@@ -116,9 +116,9 @@ void append_target_names(const std::vector<TrackedTarget>& targets, const std_ms
     m.action = visualization_msgs::Marker::ADD;
     m.pose.position.x = targets[i].position.x();
     m.pose.position.y = targets[i].position.y();
-    m.pose.position.z = targets[i].position.z() + 0.005;
+    m.pose.position.z = targets[i].position.z() + 0.004;
     m.pose.orientation.w = 1;
-    m.scale.z = 0.004;  // m, text height
+    m.scale.z = 0.003;  // m, text height
     m.color.r = m.color.g = m.color.b = m.color.a = 1.0f;
     m.text = targets[i].name;
     markers.markers.push_back(m);

@@ -39,7 +39,7 @@ void fill_mesh_marker(const LiverModel& model, const Eigen::VectorXd& reference,
 // LINE_LIST of the vessel beams at their current positions (m), one colour per vessel tree.
 void fill_vessel_marker(const LiverModel& model, visualization_msgs::Marker& marker);
 
-// Each target's name as a TEXT_VIEW_FACING marker 5 mm above it (namespace "target_names", id =
+// Each target's name as a TEXT_VIEW_FACING marker 4 mm above it (namespace "target_names", id =
 // the target's index, as the target spheres), so that the spheres stay plain.
 void append_target_names(const std::vector<TrackedTarget>& targets, const std_msgs::Header& header,
                          visualization_msgs::MarkerArray& markers);
