@@ -12,6 +12,7 @@ PACKAGES=(
   build-essential cmake catkin libroscpp-dev ros-message-generation ros-message-runtime ros-std-msgs
   libstd-msgs-dev libgeometry-msgs-dev ros-geometry-msgs libsensor-msgs-dev libvisualization-msgs-dev libstd-srvs-dev
   libdiagnostic-msgs-dev libdiagnostic-updater-dev libtf2-dev libtf2-ros-dev libtf2-geometry-msgs-dev
+  libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure
   libpcl-conversions-dev libpcl-dev
   libeigen3-dev libsuitesparse-dev libopenblas0-pthread libyaml-cpp-dev
   libgtest-dev python3-rostest librostest-dev python3-roslaunch python3-rosmaster rosout

@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 """Measures the node as launched (launch/liver_sim.launch: the liver phantom, a 2.5 mm probe)
-while a probe is driven at 30 Hz on instrument_pose, pressing 2-6 mm into the sagged right lobe
+while a probe is driven at 30 Hz on instruments/tool/pose, pressing 2-6 mm into the sagged right lobe
 and sweeping 1 cm sideways: how many of the poses reach a published mesh (each mesh carries the
 stamp of the pose it reflects), the pose -> mesh latency, and the contacts and force reported.
 With --clouds, camera clouds of the upper right lobe (record_demo_bag.py's, 0.5 mm noise, the
@@ -58,7 +58,7 @@ def main():
     rospy.Subscriber("/liver_sim/mesh", Marker, on_mesh, queue_size=100)
     rospy.Subscriber("/liver_sim/status", SimulationStatus, on_status, queue_size=100)
     rospy.Subscriber("/liver_sim/wrench", WrenchStamped, on_wrench, queue_size=100)
-    pub = rospy.Publisher("/instrument_pose", PoseStamped, queue_size=1)
+    pub = rospy.Publisher("/instruments/tool/pose", PoseStamped, queue_size=1)
     cloud_pub = rospy.Publisher("/points", PointCloud2, queue_size=1)
     # The node reaches its gravity equilibrium first (its status goes idle).
     idle = []

@@ -31,7 +31,7 @@ def main():
             received[t] = rospy.get_rostime()
 
     rospy.Subscriber("/liver_sim/mesh", Marker, on_mesh, queue_size=50)
-    pub = rospy.Publisher("/instrument_pose", PoseStamped, queue_size=1)
+    pub = rospy.Publisher("/instruments/tool/pose", PoseStamped, queue_size=1)
     time.sleep(3.0)  # initial solve, connections
 
     idle_s = 20.0

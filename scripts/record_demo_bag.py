@@ -93,7 +93,7 @@ def main():
             msg = PoseStamped(header=Header(stamp=stamp, frame_id="liver"))
             msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = probe_position(t, args.duration)
             msg.pose.orientation.w = 1.0
-            bag.write("/instrument_pose", msg, stamp)
+            bag.write("/instruments/tool/pose", msg, stamp)
             if k % 6 == 0:  # clouds at 5 Hz
                 probe_xy = np.array(probe_position(t, args.duration)[:2])
                 cloud = point_cloud2.create_cloud_xyz32(Header(stamp=stamp, frame_id="liver"),

@@ -29,7 +29,7 @@ class Node : public ::testing::Test {
     status_sub_ = nh_->subscribe("liver_sim/status", 10, &Node::on_status);
     wrench_sub_ = nh_->subscribe("liver_sim/wrench", 10, &Node::on_wrench);
     mesh_sub_ = nh_->subscribe("liver_sim/mesh", 10, &Node::on_mesh);
-    pose_pub_ = nh_->advertise<geometry_msgs::PoseStamped>("instrument_pose", 1);
+    pose_pub_ = nh_->advertise<geometry_msgs::PoseStamped>("instruments/tool/pose", 1);
     // A camera frame 10 cm along x from the model frame, for poses sent in another frame.
     tf_broadcaster_ = std::make_unique<tf2_ros::StaticTransformBroadcaster>();
     geometry_msgs::TransformStamped camera;
@@ -157,7 +157,7 @@ TEST_F(Node, SetCapsuleChangesDisplacementAndRefusesInvalidValues) {
   const unsigned rejected = status_.rejected_inputs;
   sent = ros::Time::now();
   EXPECT_FALSE(set_capsule(true, -1.0, 20e-6, 0.45).success);
-  EXPECT_FALSE(set_capsule(true, 8e6, 0.0, 0.45).success);
+  EXPECT_FALSE(set_capsule(true, 8e6, -1e-6, 0.45).success);
   EXPECT_FALSE(set_capsule(true, 8e6, 20e-6, 0.5).success);
   const liver_sim::SetCapsule::Response nan = set_capsule(true, std::nan(""), 20e-6, 0.45);
   EXPECT_FALSE(nan.success);
@@ -166,8 +166,15 @@ TEST_F(Node, SetCapsuleChangesDisplacementAndRefusesInvalidValues) {
   EXPECT_DOUBLE_EQ(after.max_displacement, without) << "a refused request changed the model";
   EXPECT_EQ(after.rejected_inputs, rejected + 4);
 
+  // Zeros keep the current values: switching the capsule back on names nothing else, and the
+  // response tells the values in force.
   sent = ros::Time::now();
-  EXPECT_TRUE(set_capsule(true, 8.22e6, 20e-6, 0.45).success);
+  const liver_sim::SetCapsule::Response on = set_capsule(true, 0, 0, 0);
+  EXPECT_TRUE(on.success) << on.message;
+  EXPECT_TRUE(on.enabled);
+  EXPECT_EQ(on.young_modulus, 8.22e6);
+  EXPECT_EQ(on.thickness, 20e-6);
+  EXPECT_EQ(on.poisson_ratio, 0.45);
   EXPECT_NEAR(settled(sent).max_displacement, with_capsule, 1e-9);
 }
 

@@ -67,6 +67,7 @@ class InstrumentContact {
   const Eigen::Isometry3d& pose(int i) const { return instruments_[i].pose; }  // at the last step
   const InstrumentReaction& reaction(int i) const { return instruments_[i].reaction; }
   const ContactOptions& options() const { return options_; }
+  std::string set_options(const ContactOptions& o);  // "" or the validation message (nothing changed)
   // The contact forces on the tissue at positions x, added to f / per DOF (N): each contact's
   // force in the frame of the instrument's surface at its point, which turns as the point moves.
   void add_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const;

@@ -52,6 +52,10 @@ class LiverModel {
   const InstrumentOptions& instrument(int i) const { return contact_.instrument(i); }
   int find_instrument(const std::string& name) const { return contact_.find_instrument(name); }
   const InstrumentReaction& instrument_reaction(int i) const { return contact_.reaction(i); }
+  const Eigen::Isometry3d& instrument_pose(int i) const { return contact_.pose(i); }  // at the last step
+  // Friction, alarm distance, tolerance and sweeps of the contact solver from the next step on.
+  // Returns "" on success, else the validation message (nothing changed).
+  std::string set_contact_options(const ContactOptions& o) { return contact_.set_options(o); }
 
   // Surface springs (registration): replaces the set, acting at the next step; the factor is
   // refreshed when their total stiffness changed by over half. Throws std::invalid_argument for

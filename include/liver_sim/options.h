@@ -184,6 +184,9 @@ struct RegistrationOptions {
 // Empty string when valid, else a message naming the field at fault.
 std::string validate(const ParenchymaOptions& o);
 std::string validate(const CapsuleOptions& o);
+// The scene files' word for a strategy ("modified_newton", ...), and the strategy of a word.
+const char* strategy_word(SolverOptions::Strategy s);
+std::optional<SolverOptions::Strategy> parse_strategy(const std::string& word);
 std::string validate(const SolverOptions& o);
 std::string validate(const Region& r);
 std::string validate(const VesselOptions& o);  // field names prefixed with "vessels.<name>."

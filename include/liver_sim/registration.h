@@ -147,6 +147,9 @@ class SurfaceRegistration {
   // The rigid alignment applied to every cloud (identity unless options.rigid_alignment).
   const Eigen::Isometry3d& alignment() const { return alignment_; }
   const RegistrationOptions& options() const { return options_; }
+  // The springs' total stiffness (N/m) from the next cloud or refinement on. Returns "" on
+  // success, else the validation message (nothing changed).
+  std::string set_stiffness(double stiffness);
   // The points of the last frame, after filtering and alignment (model frame, m).
   const pcl::PointCloud<pcl::PointXYZ>& points() const { return *points_; }
 

@@ -78,6 +78,12 @@ void InstrumentContact::update_instrument(int i, const InstrumentOptions& o) {
   instruments_[i].options = o;
 }
 
+std::string InstrumentContact::set_options(const ContactOptions& o) {
+  const std::string error = validate(o);
+  if (error.empty()) options_ = o;
+  return error;
+}
+
 int InstrumentContact::find_instrument(const std::string& name) const {
   for (int i = 0; i < num_instruments(); ++i)
     if (instruments_[i].options.name == name) return i;

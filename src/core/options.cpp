@@ -51,6 +51,26 @@ std::string validate(const CapsuleOptions& o) {
                       poisson("capsule.poisson_ratio", o.poisson_ratio), region});
 }
 
+const char* strategy_word(SolverOptions::Strategy s) {
+  using S = SolverOptions::Strategy;
+  switch (s) {
+    case S::NewtonKrylov: return "newton_krylov";
+    case S::FullNewton: return "full_newton";
+    case S::FullNewtonEigen: return "full_newton_eigen";
+    case S::ReusedFactorCG: return "reused_factor_cg";
+    case S::CG: return "cg";
+    case S::ModifiedNewton: return "modified_newton";
+  }
+  return "";
+}
+
+std::optional<SolverOptions::Strategy> parse_strategy(const std::string& word) {
+  using S = SolverOptions::Strategy;
+  for (S s : {S::NewtonKrylov, S::FullNewton, S::FullNewtonEigen, S::ReusedFactorCG, S::CG, S::ModifiedNewton})
+    if (word == strategy_word(s)) return s;
+  return std::nullopt;
+}
+
 std::string validate(const SolverOptions& o) {
   return first_error({positive("solver.dt", o.dt),
                       o.steps >= 1 ? "" : message("solver.steps", ">= 1", o.steps),

@@ -194,6 +194,15 @@ int SurfaceRegistration::estimate_supports(StateCompliance& compliance) {
   return best;
 }
 
+std::string SurfaceRegistration::set_stiffness(double stiffness) {
+  RegistrationOptions o = options_;
+  o.stiffness = stiffness;
+  const std::string error = validate(o);
+  // Only the field changes: the node's cloud filter reads the others from another thread.
+  if (error.empty()) options_.stiffness = stiffness;
+  return error;
+}
+
 void SurfaceRegistration::clear() {
   model_.set_surface_targets({});
   cloud_springs_.clear();

@@ -201,15 +201,8 @@ class Reader {
 
  private:
   SolverOptions::Strategy strategy(const YAML::Node& n, const std::string& key) const {
-    using S = SolverOptions::Strategy;
-    const std::string w =
-        word(n, key, {"newton_krylov", "full_newton", "full_newton_eigen", "reused_factor_cg", "cg", "modified_newton"});
-    return w == "newton_krylov"       ? S::NewtonKrylov
-           : w == "full_newton"       ? S::FullNewton
-           : w == "full_newton_eigen" ? S::FullNewtonEigen
-           : w == "reused_factor_cg"  ? S::ReusedFactorCG
-           : w == "cg"                ? S::CG
-                                      : S::ModifiedNewton;
+    return *parse_strategy(
+        word(n, key, {"newton_krylov", "full_newton", "full_newton_eigen", "reused_factor_cg", "cg", "modified_newton"}));
   }
 
   void read_registration(const YAML::Node& g, RegistrationOptions& o) const {

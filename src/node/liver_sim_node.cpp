@@ -2,9 +2,9 @@
 // store the latest input; the simulation loop (main thread) owns the model, steps it at ~rate
 // when there is something to do, and publishes.
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <boost/thread/recursive_mutex.hpp>
+#include <dynamic_reconfigure/server.h>
 #include <geometry_msgs/PoseArray.h>
-#include <geometry_msgs/PoseStamped.h>
-#include <geometry_msgs/WrenchStamped.h>
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 #include <pcl_conversions/pcl_conversions.h>
@@ -26,7 +26,7 @@
 #include <sstream>
 #include <thread>
 
-#include "liver_sim/InstrumentCommand.h"
+#include "liver_sim/LiverSimConfig.h"
 #include "liver_sim/SetCapsule.h"
 #include "liver_sim/SimulationStatus.h"
 #include "liver_sim/TargetCovariances.h"
@@ -35,6 +35,7 @@
 #include "liver_sim/target_uncertainty.h"
 #include "liver_sim/worker_pool.h"
 #include "mesh_marker.h"
+#include "ros_instruments.h"
 
 namespace liver_sim {
 namespace {
@@ -50,12 +51,6 @@ std::string scalar_text(const XmlRpc::XmlRpcValue& v) {
     default: throw std::invalid_argument("only scalar parameters can override scene values");
   }
   return s.str();
-}
-
-bool finite(const geometry_msgs::Pose& p) {
-  return std::isfinite(p.position.x) && std::isfinite(p.position.y) && std::isfinite(p.position.z) &&
-         std::isfinite(p.orientation.x) && std::isfinite(p.orientation.y) && std::isfinite(p.orientation.z) &&
-         std::isfinite(p.orientation.w);
 }
 
 Eigen::Isometry3d to_eigen(const geometry_msgs::Transform& t) {
@@ -75,21 +70,18 @@ class LiverSimNode {
     pnh.param<std::string>("frame_id", frame_id_, "liver");
     pnh.param("rate", rate_, 30.0);
     pnh.param("publish_rate", publish_rate_, 15.0);
-    pnh.param("instrument_radius", probe_radius_, 0.003);
-    pnh.param("instrument_length", probe_length_, 0.1);
     pnh.param("color_scale_max", color_scale_max_, 0.005);
     pnh.param("surface_alpha", surface_alpha_, 1.0);
-    pnh.param("instrument_frames", instrument_frames_, std::vector<std::string>{});
-    if (!(rate_ > 0) || !(publish_rate_ > 0) || !(probe_radius_ > 0) || !(probe_length_ > 0) || !(color_scale_max_ > 0))
-      throw std::invalid_argument(
-          "~rate, ~publish_rate, ~instrument_radius, ~instrument_length and ~color_scale_max must be > 0");
+    if (!(rate_ >= 1 && rate_ <= 1000) || !(publish_rate_ >= 0.1 && publish_rate_ <= 100))
+      throw std::invalid_argument("~rate must be in [1, 1000] Hz, ~publish_rate in [0.1, 100] Hz");
+    if (!(color_scale_max_ > 0)) throw std::invalid_argument("~color_scale_max must be > 0");
     if (!(surface_alpha_ >= 0 && surface_alpha_ <= 1)) throw std::invalid_argument("~surface_alpha must be in [0, 1]");
-    // ~parenchyma/*, ~capsule/*, ~solver/* override the scalars of the scene file; ~threads is
+    // ~parenchyma/*, ~capsule/*, ~solver/*, ~contact/* override the scalars of the scene file; ~threads is
     // solver.threads. The node steps in real-time frames by default: modified Newton on a reused
     // factor (contacts carried in the same solve), two iterations a frame, a step that has not
     // converged continuing in the next frame; ~solver/strategy and ~solver/max_iterations change that.
     std::vector<std::string> overrides = {"solver.strategy=modified_newton", "solver.max_iterations=2"};
-    for (const char* section : {"parenchyma", "capsule", "solver"}) {
+    for (const char* section : {"parenchyma", "capsule", "solver", "contact"}) {
       XmlRpc::XmlRpcValue values;
       if (!pnh.getParam(section, values)) continue;
       if (values.getType() != XmlRpc::XmlRpcValue::TypeStruct)
@@ -122,48 +114,64 @@ class LiverSimNode {
     for (int i = 0; i < model_->positions().size(); i += 3) cloud_box_.extend(model_->positions().segment<3>(i));
     cloud_box_.min().array() -= scene.registration.max_distance + cloud_margin_;
     cloud_box_.max().array() += scene.registration.max_distance + cloud_margin_;
-    // The instrument driven by instrument_pose / instrument_frames: out of the scene until its
-    // first pose.
-    // A rod with a hemispherical tip: the pose is the tip's centre, its +z runs back along the rod
+    // The default instrument `tool` and one per ~instrument_frames: rods with a hemispherical tip
     // (a sphere alone pressed deeper than its radius would let the tissue close over it).
-    InstrumentOptions probe;
-    probe.name = "ros_probe";
-    probe.type = InstrumentOptions::Type::Shaft;
-    probe.radius = probe_radius_;
-    probe.length = probe_length_;
-    probe.enabled = false;
-    probe_index_ = model_->add_instrument(probe);
+    RosInstruments::Settings instruments;
+    instruments.frame_id = frame_id_;
+    instruments.tool.type = InstrumentOptions::Type::Shaft;
+    pnh.param("instrument_radius", instruments.tool.radius, 0.003);
+    pnh.param("instrument_length", instruments.tool.length, 0.1);
+    pnh.param("instrument_frames", instruments.frames, std::vector<std::string>{});
+    pnh.param("instrument_tf_timeout", instruments.tf_timeout, 0.1);
+    pnh.param("pose_timeout", instruments.pose_timeout, 1.0);
+    pnh.param("hold_stale_instruments", instruments.hold_stale, false);
+    instruments_ = std::make_unique<RosInstruments>(nh, pnh, tf_buffer_, *model_, instruments,
+                                                    [this](const std::string& why) { reject(why); });
     ROS_INFO("liver_sim: %s: %ld nodes, %ld tetrahedra, %d capsule triangles, %d vessel beams, %s mode",
              scene_path.c_str(), static_cast<long>(model_->mesh().V.rows()), static_cast<long>(model_->mesh().T.rows()),
              model_->capsule_triangles(), model_->num_beams(),
              scene.solver.mode == SolverOptions::Mode::Static ? "static" : "dynamic");
 
     mesh_pub_ = pnh.advertise<visualization_msgs::Marker>("mesh", 1, true);
-    instrument_pub_ = pnh.advertise<visualization_msgs::Marker>("instruments", 1, true);
     vessel_pub_ = pnh.advertise<visualization_msgs::Marker>("vessels", 1, true);
     status_pub_ = pnh.advertise<SimulationStatus>("status", 10);
-    wrench_pub_ = pnh.advertise<geometry_msgs::WrenchStamped>("wrench", 10);
     target_marker_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("targets", 1, true);
     target_pose_pub_ = pnh.advertise<geometry_msgs::PoseArray>("target_poses", 1, true);
     covariance_pub_ = pnh.advertise<TargetCovariances>("target_covariances", 1, true);
     ellipsoid_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("target_ellipsoids", 1, true);
-    pose_sub_ = nh.subscribe("instrument_pose", 1, &LiverSimNode::on_pose, this);
-    command_sub_ = nh.subscribe("instrument_command", 10, &LiverSimNode::on_command, this);
     cloud_sub_ = nh.subscribe("points", 1, &LiverSimNode::on_cloud, this);
     reset_srv_ = pnh.advertiseService("reset", &LiverSimNode::on_reset, this);
     capsule_srv_ = pnh.advertiseService("set_capsule", &LiverSimNode::on_set_capsule, this);
     align_srv_ = pnh.advertiseService("align_rigidly", &LiverSimNode::on_align_rigidly, this);
     updater_.setHardwareID("liver_sim");
     updater_.add("liver model", this, &LiverSimNode::diagnose);
+    // Live tuning: the server starts from the node's values, so that connecting changes nothing.
+    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<LiverSimConfig>>(reconfigure_mutex_, pnh);
+    LiverSimConfig config;
+    config.strategy = strategy_word(model_->solver_options().strategy);
+    config.max_iterations = model_->solver_options().max_iterations;
+    config.tolerance = model_->solver_options().tolerance;
+    config.rate = rate_;
+    config.publish_rate = publish_rate_;
+    config.friction = model_->contact().options().friction;
+    config.registration_stiffness = registration_->options().stiffness;
+    config.color_scale_max = color_scale_max_;
+    config.surface_alpha = surface_alpha_;
+    config.pose_timeout = instruments.pose_timeout;
+    config.hold_stale_instruments = instruments.hold_stale;
+    reconfigure_->updateConfig(config);
+    reconfigure_->setCallback([this](LiverSimConfig& c, uint32_t) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      pending_config_ = c;
+    });
   }
 
   void run() {
     ros::WallRate loop(rate_);
-    const ros::WallDuration publish_period(1.0 / publish_rate_);
     ros::WallTime next_publish = ros::WallTime::now();
     bool must_step = true;  // the first step brings the scene's loads to equilibrium
     while (ros::ok()) {
-      must_step |= apply_inputs();
+      must_step |= apply_inputs(loop);
       std::optional<RegistrationFrame> registered = register_pending_cloud();
       if (registered) registering_ = true;
       analyse_registration(registered.has_value());
@@ -182,6 +190,7 @@ class LiverSimNode {
         }
         if (r.status != StepResult::Status::NotConverged) registering_ = false;
         ++steps_;
+        step_times_.push_back(ros::WallTime::now());
         last_ = r;
         // Continue next frame while iterating; a diverged step waits for new input.
         must_step = r.status == StepResult::Status::NotConverged ||
@@ -195,10 +204,9 @@ class LiverSimNode {
       } else {
         state_ = state_ == "diverged" ? state_ : "idle";
       }
-      frame_times_.push_back(ros::WallTime::now());
-      while (frame_times_.front() < frame_times_.back() - ros::WallDuration(1.0)) frame_times_.pop_front();
       const ros::WallTime now = ros::WallTime::now();
       if (now >= next_publish) {
+        const ros::WallDuration publish_period(1.0 / publish_rate_);
         publish_mesh();
         if (!must_step) publish_status(last_);
         next_publish += publish_period;
@@ -210,14 +218,24 @@ class LiverSimNode {
   }
 
  private:
-  // Moves pending inputs into the model; true when something changed.
-  bool apply_inputs() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    bool changed = false;
-    if (reset_requested_) {
+  // Moves pending inputs into the model; true when something changed. The node's lock is not
+  // held while the instruments apply theirs (they report refusals through reject()).
+  bool apply_inputs(ros::WallRate& loop) {
+    bool reset = false;
+    std::optional<CapsuleOptions> capsule;
+    std::optional<LiverSimConfig> config;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      std::swap(reset, reset_requested_);
+      capsule.swap(pending_capsule_);
+      config.swap(pending_config_);
+    }
+    bool changed = reset || capsule.has_value();
+    if (reset) {
       model_->reset();  // also removes the registration's springs
       registration_->clear();
       reference_.resize(0);
+      instruments_->release_all(*model_);
       registering_ = false;
       clouds_registered_ = 0;
       registration_rms_ = 0;
@@ -225,104 +243,53 @@ class LiverSimNode {
       registered_ = RegistrationFrame();
       covariances_.clear();
       analysis_due_ = false;
-      set_probe(std::nullopt);
-      probe_pose_.reset();
-      pose_changed_ = false;
-      reset_requested_ = false;
       steps_ = 0;
-      changed = true;
     }
-    if (pending_capsule_) {
-      const std::string error = model_->set_capsule(*pending_capsule_);  // validated already
-      if (error.empty()) capsule_ = *pending_capsule_;
+    if (capsule) {
+      const std::string error = model_->set_capsule(*capsule);  // validated already
+      if (error.empty()) capsule_ = *capsule;
       else ROS_ERROR("liver_sim: capsule change failed: %s", error.c_str());
-      pending_capsule_.reset();
-      changed = true;
     }
-    for (const std::string& frame : instrument_frames_) lookup_instrument_frame(frame);
-    if (probe_removed_) {
-      set_probe(std::nullopt);
-      probe_pose_.reset();
-      probe_removed_ = false;
-      changed = true;
-    }
-    if (pose_changed_ && probe_pose_) {
-      set_probe(probe_pose_);
-      reflected_stamp_ = pose_stamp_;
-      pose_changed_ = false;
+    if (config) changed |= reconfigure(*config, loop);
+    if (instruments_->apply(*model_)) {
+      reflected_stamp_ = instruments_->reflected_stamp();
       changed = true;
     }
     return changed;
   }
 
-  // The ROS-driven probe at a tip pose, or out of the scene. (mutex held)
-  void set_probe(const std::optional<Eigen::Isometry3d>& pose) {
-    InstrumentOptions o = model_->instrument(probe_index_);
-    o.enabled = pose.has_value();
-    if (pose) {
-      o.position = pose->translation();
-      o.orientation = Eigen::Quaterniond(pose->linear());
-    }
-    o.radius = probe_radius_;
-    model_->update_instrument(probe_index_, o);  // inputs are validated on arrival
+  // A dynamic_reconfigure change (bounded by the config's limits); true when the model changed.
+  bool reconfigure(const LiverSimConfig& c, ros::WallRate& loop) {
+    SolverOptions solver = model_->solver_options();
+    solver.strategy = parse_strategy(c.strategy).value_or(solver.strategy);
+    solver.max_iterations = c.max_iterations;
+    solver.tolerance = c.tolerance;
+    ContactOptions contact = model_->contact().options();
+    contact.friction = c.friction;
+    const bool model_changed = solver.strategy != model_->solver_options().strategy ||
+                               solver.max_iterations != model_->solver_options().max_iterations ||
+                               solver.tolerance != model_->solver_options().tolerance ||
+                               contact.friction != model_->contact().options().friction;
+    std::string error = model_->set_solver_options(solver);
+    if (error.empty()) error = model_->set_contact_options(contact);
+    if (error.empty()) error = registration_->set_stiffness(c.registration_stiffness);
+    if (!error.empty()) reject("reconfigure: " + error);
+    if (c.rate != rate_) loop = ros::WallRate(c.rate);
+    rate_ = c.rate;
+    publish_rate_ = c.publish_rate;
+    color_scale_max_ = c.color_scale_max;
+    surface_alpha_ = c.surface_alpha;
+    instruments_->set_staleness(c.pose_timeout, c.hold_stale_instruments);
+    ROS_INFO("liver_sim: reconfigured: %s, %d iterations a frame, tolerance %g, %g Hz, friction %g",
+             c.strategy.c_str(), c.max_iterations, c.tolerance, c.rate, c.friction);
+    return model_changed;
   }
 
-  // Instruments tracked through tf: the frame is the probe's tip pose. (mutex held)
-  void lookup_instrument_frame(const std::string& frame) {
-    try {
-      const geometry_msgs::TransformStamped t = tf_buffer_.lookupTransform(frame_id_, frame, ros::Time(0));
-      const Eigen::Isometry3d c = to_eigen(t.transform);
-      if (!c.matrix().allFinite()) return reject("non-finite transform of " + frame);
-      if (!probe_pose_ || !probe_pose_->isApprox(c, 1e-9)) {
-        probe_pose_ = c;
-        pose_stamp_ = t.header.stamp;
-        pose_changed_ = true;
-      }
-    } catch (const tf2::TransformException& e) {
-      ROS_WARN_THROTTLE(5.0, "liver_sim: instrument frame %s: %s", frame.c_str(), e.what());
-    }
-  }
-
-  void reject(const std::string& why) {  // mutex held
+  void reject(const std::string& why) {
+    std::lock_guard<std::mutex> lock(mutex_);
     ++rejected_;
-    last_rejection_ = why;
+    last_rejection_ = fresh_rejection_ = why;
     ROS_WARN_THROTTLE(1.0, "liver_sim: refused input: %s", why.c_str());
-  }
-
-  void on_pose(const geometry_msgs::PoseStamped::ConstPtr& msg) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (!finite(msg->pose)) return reject("instrument_pose with NaN or infinite values");
-    geometry_msgs::PoseStamped p = *msg;
-    if (!p.header.frame_id.empty() && p.header.frame_id != frame_id_) {
-      try {
-        p = tf_buffer_.transform(*msg, frame_id_, ros::Duration(0.0));
-      } catch (const tf2::TransformException& e) {
-        return reject("instrument_pose in frame '" + msg->header.frame_id + "': " + e.what());
-      }
-    }
-    // An orientation left at zeros (unset) is the identity: the rod points up the frame's z.
-    const auto& o = p.pose.orientation;
-    Eigen::Quaterniond q(o.w, o.x, o.y, o.z);
-    if (q.coeffs().isZero(0.0)) q.setIdentity();
-    if (!(std::abs(q.norm() - 1) < 1e-3)) return reject("instrument_pose orientation is not a unit quaternion");
-    probe_pose_ = make_pose(Eigen::Vector3d(p.pose.position.x, p.pose.position.y, p.pose.position.z), q);
-    pose_stamp_ = msg->header.stamp;
-    pose_changed_ = true;
-  }
-
-  void on_command(const InstrumentCommand::ConstPtr& msg) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (msg->type != "probe")
-      return reject("instrument type '" + msg->type + "' is not available yet (probe only)");
-    if (msg->remove) {
-      probe_removed_ = true;
-      return;
-    }
-    if (!std::isfinite(msg->radius) || msg->radius < 0) return reject("instrument radius must be finite and >= 0");
-    if (msg->radius > 0) {
-      probe_radius_ = msg->radius;
-      pose_changed_ = probe_pose_.has_value();
-    }
   }
 
   // Why a cloud cannot be converted, or "" (PCL's conversion indexes an empty cloud and trusts
@@ -346,29 +313,22 @@ class LiverSimNode {
   void on_cloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     const ros::WallTime t0 = ros::WallTime::now();
     const std::string layout = cloud_layout_error(*msg);
-    if (!layout.empty()) {
-      std::lock_guard<std::mutex> lock(mutex_);
-      return reject("points: " + layout);
-    }
+    if (!layout.empty()) return reject("points: " + layout);
     Eigen::Isometry3d to_model = Eigen::Isometry3d::Identity();
     if (!msg->header.frame_id.empty() && msg->header.frame_id != frame_id_) {
       try {
         to_model = to_eigen(
             tf_buffer_.lookupTransform(frame_id_, msg->header.frame_id, msg->header.stamp, ros::Duration(0.1)).transform);
       } catch (const tf2::TransformException& e) {
-        std::lock_guard<std::mutex> lock(mutex_);
         return reject("points in frame '" + msg->header.frame_id + "': " + e.what());
       }
-      if (!to_model.matrix().allFinite()) {
-        std::lock_guard<std::mutex> lock(mutex_);
+      if (!to_model.matrix().allFinite())
         return reject("points: non-finite transform from frame '" + msg->header.frame_id + "'");
-      }
     }
     pcl::PointCloud<pcl::PointXYZ> cloud;
     try {
       pcl::fromROSMsg(*msg, cloud);
     } catch (const std::exception& e) {
-      std::lock_guard<std::mutex> lock(mutex_);
       return reject(std::string("points: ") + e.what());
     }
     PendingCloud pending;
@@ -379,11 +339,14 @@ class LiverSimNode {
     if (!msg->header.frame_id.empty() && msg->header.frame_id != frame_id_) pending.viewpoint = to_model.translation();
     pending.stamp = msg->header.stamp;
     const double filter_s = (ros::WallTime::now() - t0).toSec();
-    std::lock_guard<std::mutex> lock(mutex_);
-    last_cloud_filter_s_ = filter_s;
-    last_cloud_points_ = cloud.size();
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      last_cloud_filter_s_ = filter_s;
+      last_cloud_points_ = cloud.size();
+    }
     if (finite_points == 0) return reject("points: no finite point");
     if (pending.points.empty()) return reject("points: no point near the model");
+    std::lock_guard<std::mutex> lock(mutex_);
     pending_cloud_ = std::move(pending);  // replaced, never queued: the latest cloud wins
     ++clouds_;
   }
@@ -411,7 +374,6 @@ class LiverSimNode {
       }
       return f;
     } catch (const std::invalid_argument& e) {
-      std::lock_guard<std::mutex> lock(mutex_);
       reject(std::string("points: ") + e.what());
       return std::nullopt;
     }
@@ -442,6 +404,7 @@ class LiverSimNode {
   bool on_reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
     reset_requested_ = true;
+    align_requested_ = false;
     pending_cloud_.reset();
     res.success = true;
     res.message = "back to the rest shape at the next step; instruments released until their next pose";
@@ -457,20 +420,26 @@ class LiverSimNode {
   }
 
   bool on_set_capsule(SetCapsule::Request& req, SetCapsule::Response& res) {
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::unique_lock<std::mutex> lock(mutex_);
     CapsuleOptions c = pending_capsule_ ? *pending_capsule_ : capsule_;
     c.enabled = req.enabled;
-    c.young_modulus = req.young_modulus;
-    c.thickness = req.thickness;
-    c.poisson_ratio = req.poisson_ratio;
+    if (req.young_modulus != 0) c.young_modulus = req.young_modulus;
+    if (req.thickness != 0) c.thickness = req.thickness;
+    if (req.poisson_ratio != 0) c.poisson_ratio = req.poisson_ratio;
     res.message = validate(c);
     res.success = res.message.empty();
-    if (!res.success) {
-      reject("set_capsule: " + res.message);
-      return true;
+    if (res.success) {
+      pending_capsule_ = c;
+      res.message = "applied at the next step";
+    } else {
+      c = pending_capsule_ ? *pending_capsule_ : capsule_;
     }
-    pending_capsule_ = c;
-    res.message = "applied at the next step";
+    res.enabled = c.enabled;
+    res.young_modulus = c.young_modulus;
+    res.thickness = c.thickness;
+    res.poisson_ratio = c.poisson_ratio;
+    lock.unlock();
+    if (!res.success) reject("set_capsule: " + res.message);
     return true;
   }
 
@@ -479,7 +448,9 @@ class LiverSimNode {
     s.header.stamp = ros::Time::now();
     s.header.frame_id = frame_id_;
     s.step = steps_;
-    s.rate = frame_times_.size() > 1 ? (frame_times_.size() - 1) / (frame_times_.back() - frame_times_.front()).toSec() : 0.0;
+    const ros::WallTime now = ros::WallTime::now();
+    while (!step_times_.empty() && step_times_.front() < now - ros::WallDuration(1.0)) step_times_.pop_front();
+    s.rate = static_cast<double>(step_times_.size());  // steps in the last second
     s.step_time = r.timing.total_ms / 1000.0;
     s.iterations = r.iterations;
     s.residual = r.residual;
@@ -494,23 +465,16 @@ class LiverSimNode {
     s.registration_rms_all = registered_.rms_all;
     s.target_radius_95 = largest_radius_95();
     for (bool held : registration_->supports_held()) s.supports_held += held;
+    instruments_->fill_status(*model_, s);
     {
+      // A refusal is told in the next status only: later ones say how the model is.
       std::lock_guard<std::mutex> lock(mutex_);
       s.rejected_inputs = rejected_;
-      s.text = r.message.empty() ? last_rejection_ : r.message;
+      s.text = r.message.empty() ? fresh_rejection_ : r.message;
+      fresh_rejection_.clear();
     }
     status_pub_.publish(s);
-
-    geometry_msgs::WrenchStamped w;
-    w.header = s.header;
-    const auto& reaction = model_->instrument_reaction(probe_index_);
-    w.wrench.force.x = reaction.force.x();
-    w.wrench.force.y = reaction.force.y();
-    w.wrench.force.z = reaction.force.z();
-    w.wrench.torque.x = reaction.torque.x();
-    w.wrench.torque.y = reaction.torque.y();
-    w.wrench.torque.z = reaction.torque.z();
-    wrench_pub_.publish(w);
+    instruments_->publish(*model_, s.header);
   }
 
   void publish_mesh() {
@@ -531,32 +495,6 @@ class LiverSimNode {
       fill_vessel_marker(*model_, vessel_marker_);
       vessel_pub_.publish(vessel_marker_);
     }
-
-    // The probe's rod as a translucent cylinder from its tip along its +z (deleted when there is
-    // no probe).
-    visualization_msgs::Marker tip;
-    tip.header = marker_.header;
-    tip.ns = "instruments";
-    tip.type = visualization_msgs::Marker::CYLINDER;
-    std::lock_guard<std::mutex> lock(mutex_);
-    tip.action = probe_pose_ ? visualization_msgs::Marker::ADD : visualization_msgs::Marker::DELETE;
-    tip.pose.orientation.w = 1;
-    if (probe_pose_) {
-      const Eigen::Vector3d centre = *probe_pose_ * Eigen::Vector3d(0, 0, 0.5 * probe_length_);
-      const Eigen::Quaterniond q(probe_pose_->linear());
-      tip.pose.position.x = centre.x();
-      tip.pose.position.y = centre.y();
-      tip.pose.position.z = centre.z();
-      tip.pose.orientation.x = q.x();
-      tip.pose.orientation.y = q.y();
-      tip.pose.orientation.z = q.z();
-      tip.pose.orientation.w = q.w();
-    }
-    tip.scale.x = tip.scale.y = 2 * probe_radius_;
-    tip.scale.z = probe_length_;
-    tip.color.r = tip.color.g = tip.color.b = 0.8f;
-    tip.color.a = 0.6f;
-    instrument_pub_.publish(tip);
   }
 
   // The tumour probes and vessel bifurcations where the model has them now: spheres (tumour
@@ -662,11 +600,10 @@ class LiverSimNode {
   tf2_ros::TransformListener tf_listener_;
   diagnostic_updater::Updater updater_;
   std::unique_ptr<LiverModel> model_;
-  int probe_index_ = -1;
+  std::unique_ptr<RosInstruments> instruments_;
   std::string frame_id_;
-  double rate_, publish_rate_, probe_radius_, probe_length_, color_scale_max_, surface_alpha_;
-  std::vector<std::string> instrument_frames_;
-  ros::Publisher mesh_pub_, instrument_pub_, vessel_pub_, status_pub_, wrench_pub_, target_marker_pub_, target_pose_pub_;
+  double rate_, publish_rate_, color_scale_max_, surface_alpha_;
+  ros::Publisher mesh_pub_, vessel_pub_, status_pub_, target_marker_pub_, target_pose_pub_;
   ros::Publisher covariance_pub_, ellipsoid_pub_;
   std::unique_ptr<SurfaceRegistration> registration_;
   std::unique_ptr<TargetUncertainty> uncertainty_;
@@ -674,15 +611,17 @@ class LiverSimNode {
   double uncertainty_period_ = 1.0;  // s
   double cloud_margin_ = 0.05;  // m
   Eigen::AlignedBox3d cloud_box_;  // model frame: where cloud points can matter
-  ros::Subscriber pose_sub_, command_sub_, cloud_sub_;
+  ros::Subscriber cloud_sub_;
   ros::ServiceServer reset_srv_, capsule_srv_, align_srv_;
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<LiverSimConfig>> reconfigure_;
   visualization_msgs::Marker marker_, vessel_marker_;
 
   // Simulation thread only.
   StepResult last_;
   uint64_t steps_ = 0;
   std::string state_ = "idle";
-  std::deque<ros::WallTime> frame_times_;
+  std::deque<ros::WallTime> step_times_;  // of the steps in the last second
   ros::Time reflected_stamp_;
   Eigen::VectorXd reference_;  // m, 3 #V: the pre-operative equilibrium; empty until known
   uint64_t clouds_registered_ = 0;
@@ -697,9 +636,8 @@ class LiverSimNode {
 
   // Shared with callbacks, under mutex_.
   std::mutex mutex_;
-  std::optional<Eigen::Isometry3d> probe_pose_;
-  ros::Time pose_stamp_;
-  bool pose_changed_ = false, probe_removed_ = false, reset_requested_ = false, align_requested_ = false;
+  bool reset_requested_ = false, align_requested_ = false;
+  std::optional<LiverSimConfig> pending_config_;
   std::optional<CapsuleOptions> pending_capsule_;
   CapsuleOptions capsule_;  // as applied to the model
   struct PendingCloud {
@@ -712,7 +650,7 @@ class LiverSimNode {
   size_t last_cloud_points_ = 0;
   uint32_t rejected_ = 0;
   uint64_t clouds_ = 0;
-  std::string last_rejection_;
+  std::string last_rejection_, fresh_rejection_;
 };
 
 }  // namespace liver_sim
