@@ -111,11 +111,11 @@ class Camera:
 class Instrument:
     """One named instrument of the node: declared on instrument_command, posed on its topic."""
 
-    def __init__(self, name, type_, radius):
+    def __init__(self, name, type_, radius, length=0.0):
         self.name = name
         self.commands = rospy.Publisher("/instrument_command", InstrumentCommand, queue_size=10, latch=False)
         self.poses = rospy.Publisher(f"/instruments/{name}/pose", PoseStamped, queue_size=1)
-        self.declaration = InstrumentCommand(name=name, type=type_, radius=radius)
+        self.declaration = InstrumentCommand(name=name, type=type_, radius=radius, length=length)
         self.tip = None
         self.force = np.zeros(3)
         rospy.Subscriber(f"{NODE}/instruments/{name}/wrench", WrenchStamped, self.on_wrench, queue_size=5)
@@ -227,7 +227,7 @@ def main():
     cloud_pub = rospy.Publisher("/points", PointCloud2, queue_size=1)
 
     grasper = Instrument("grasper", "grasper", JAW_RADIUS)
-    probe = Instrument("probe", "probe", PROBE_RADIUS)
+    probe = Instrument("probe", "shaft", PROBE_RADIUS, 0.1)  # a rod with a rounded tip: no tissue closes over it
     time.sleep(1.0)  # subscriptions connect
     grasper_dir = np.array([1.0, 0.0, 1.0]) / math.sqrt(2)  # from the side, above
     probe_dir = np.array([0.0, 0.0, 1.0])
