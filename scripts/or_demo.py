@@ -218,7 +218,6 @@ def main():
     with session.lock:
         tumour_preop = session.targets[0].copy()
     preop = session.triangles()
-    centre = preop.reshape(-1, 3).mean(axis=0)
     # The intra-operative liver the camera sees: up to 3 mm higher over the right lobe.
     lift = 3e-3 * np.exp(-np.sum((preop[..., :2] - [0.06, -0.03]) ** 2, axis=-1) / (2 * 0.04**2))
     truth = preop.copy()
@@ -325,8 +324,7 @@ def main():
             frames = (s.step - last_step) / (now - last_line_t)
             last_step, last_line_t = s.step, now
             tumour = np.linalg.norm(targets[0] - tumour_preop)
-            names = getattr(s, "instrument_names", [])
-            per = ", ".join(f"{n} {c}" for n, c in zip(names, getattr(s, "instrument_contacts", [])) if c)
+            per = ", ".join(f"{n} {c}" for n, c in zip(s.instrument_names, s.instrument_contacts) if c)
             phase = [text for begin, text in phases if begin <= t][-1]
             latency = f"{np.median(latencies) * 1e3:4.0f} ms" if latencies else "   - ms"
             rows.append((frames, s.active_contacts, s.registration_rms, tumour))
