@@ -97,6 +97,15 @@ TEST(CholmodSolver, SolvesLikeDenseCholeskyAndReusesAnalysis) {
   }
   EXPECT_EQ(solver.analyses(), 1);
   EXPECT_EQ(solver.factorizations(), 2);
+  // Several right-hand sides at once, as the dense solve's columns; none gives none (a scene
+  // without targets: this crashed inside CHOLMOD).
+  Eigen::MatrixXd B(A.pattern.rows(), 2), X;
+  B << b, b.reverse();
+  solver.solve(B, X);
+  EXPECT_LE((X - (2.5 * A.dense).llt().solve(B)).norm(), 1e-10 * X.norm());
+  solver.solve(Eigen::MatrixXd(A.pattern.rows(), 0), X);
+  EXPECT_EQ(X.rows(), A.pattern.rows());
+  EXPECT_EQ(X.cols(), 0);
 }
 
 // The halves of a solve and the sparse forward columns against a dense inverse, on a box whose

@@ -117,6 +117,10 @@ void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) {
 }
 
 void CholmodSolver::solve(const Eigen::MatrixXd& B, Eigen::MatrixXd& X) {
+  if (B.cols() == 0) {  // CHOLMOD reads a null array for no columns (a scene without targets)
+    X.resize(B.rows(), 0);
+    return;
+  }
   solve_columns(B.data(), B.cols());
   X = Eigen::Map<const Eigen::MatrixXd>(static_cast<double*>(x_->x), B.rows(), B.cols());
 }

@@ -76,12 +76,12 @@ class LiverSimNode {
       throw std::invalid_argument("~rate must be in [1, 1000] Hz, ~publish_rate in [0.1, 100] Hz");
     if (!(color_scale_max_ > 0)) throw std::invalid_argument("~color_scale_max must be > 0");
     if (!(surface_alpha_ >= 0 && surface_alpha_ <= 1)) throw std::invalid_argument("~surface_alpha must be in [0, 1]");
-    // ~parenchyma/*, ~capsule/*, ~solver/*, ~contact/* override the scalars of the scene file; ~threads is
-    // solver.threads. The node steps in real-time frames by default: modified Newton on a reused
+    // ~parenchyma/*, ~capsule/*, ~solver/*, ~contact/*, ~registration/* override the scalars of the
+    // scene file; ~threads is solver.threads. The node steps in real-time frames by default: modified Newton on a reused
     // factor (contacts carried in the same solve), two iterations a frame, a step that has not
     // converged continuing in the next frame; ~solver/strategy and ~solver/max_iterations change that.
     std::vector<std::string> overrides = {"solver.strategy=modified_newton", "solver.max_iterations=2"};
-    for (const char* section : {"parenchyma", "capsule", "solver", "contact"}) {
+    for (const char* section : {"parenchyma", "capsule", "solver", "contact", "registration"}) {
       XmlRpc::XmlRpcValue values;
       if (!pnh.getParam(section, values)) continue;
       if (values.getType() != XmlRpc::XmlRpcValue::TypeStruct)
@@ -126,7 +126,8 @@ class LiverSimNode {
     pnh.param("pose_timeout", instruments.pose_timeout, 1.0);
     pnh.param("hold_stale_instruments", instruments.hold_stale, false);
     instruments_ = std::make_unique<RosInstruments>(nh, pnh, tf_buffer_, *model_, instruments,
-                                                    [this](const std::string& why) { reject(why); });
+                                                    [this](const std::string& why) { reject(why); },
+                                                    [this](const std::string& what) { warn(what); });
     ROS_INFO("liver_sim: %s: %ld nodes, %ld tetrahedra, %d capsule triangles, %d vessel beams, %s mode",
              scene_path.c_str(), static_cast<long>(model_->mesh().V.rows()), static_cast<long>(model_->mesh().T.rows()),
              model_->capsule_triangles(), model_->num_beams(),
@@ -288,8 +289,15 @@ class LiverSimNode {
   void reject(const std::string& why) {
     std::lock_guard<std::mutex> lock(mutex_);
     ++rejected_;
-    last_rejection_ = fresh_rejection_ = why;
+    last_rejection_ = fresh_text_ = why;
     ROS_WARN_THROTTLE(1.0, "liver_sim: refused input: %s", why.c_str());
+  }
+
+  // An event the next status tells (not a refused input).
+  void warn(const std::string& what) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    fresh_text_ = what;
+    ROS_WARN("liver_sim: %s", what.c_str());
   }
 
   // Why a cloud cannot be converted, or "" (PCL's conversion indexes an empty cloud and trusts
@@ -467,11 +475,11 @@ class LiverSimNode {
     for (bool held : registration_->supports_held()) s.supports_held += held;
     instruments_->fill_status(*model_, s);
     {
-      // A refusal is told in the next status only: later ones say how the model is.
+      // A refusal or an event is told in the next status only: later ones say how the model is.
       std::lock_guard<std::mutex> lock(mutex_);
       s.rejected_inputs = rejected_;
-      s.text = r.message.empty() ? fresh_rejection_ : r.message;
-      fresh_rejection_.clear();
+      s.text = r.message.empty() ? fresh_text_ : r.message;
+      fresh_text_.clear();
     }
     status_pub_.publish(s);
     instruments_->publish(*model_, s.header);
@@ -650,7 +658,7 @@ class LiverSimNode {
   size_t last_cloud_points_ = 0;
   uint32_t rejected_ = 0;
   uint64_t clouds_ = 0;
-  std::string last_rejection_, fresh_rejection_;
+  std::string last_rejection_, fresh_text_;
 };
 
 }  // namespace liver_sim

@@ -6,6 +6,7 @@
 
 #include <boost/bind/bind.hpp>
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 
 namespace liver_sim {
@@ -74,8 +75,9 @@ geometry_msgs::Pose to_pose(const Eigen::Isometry3d& P) {
 }  // namespace
 
 RosInstruments::RosInstruments(ros::NodeHandle& nh, ros::NodeHandle& pnh, tf2_ros::Buffer& tf, LiverModel& model,
-                               const Settings& settings, std::function<void(const std::string&)> reject)
-    : nh_(nh), pnh_(pnh), tf_(tf), settings_(settings), reject_(std::move(reject)) {
+                               const Settings& settings, std::function<void(const std::string&)> reject,
+                               std::function<void(const std::string&)> warn)
+    : nh_(nh), pnh_(pnh), tf_(tf), settings_(settings), reject_(std::move(reject)), warn_(std::move(warn)) {
   if (!(settings_.tf_timeout >= 0 && settings_.tf_timeout <= 1))
     throw std::invalid_argument("~instrument_tf_timeout must be in [0, 1] s");
   if (!(settings_.pose_timeout >= 0)) throw std::invalid_argument("~pose_timeout must be >= 0 s");
@@ -156,11 +158,16 @@ void RosInstruments::on_command(const InstrumentCommand::ConstPtr& msg) {
   const InstrumentCommand& c = *msg;
   std::string error = name_error(c.name);
   if (!error.empty()) return reject_("instrument_command: " + error);
-  // An unknown frame is refused rather than waited for: a typo would otherwise hold the
+  // A frame tf does not know within the timeout is refused: a typo would otherwise hold the
   // instrument out of the scene without a word.
-  if (!c.remove && !c.frame.empty() &&
-      !tf_.canTransform(settings_.frame_id, c.frame, ros::Time(0), ros::Duration(settings_.tf_timeout), &error))
-    return reject_("instrument_command " + c.name + ": frame '" + c.frame + "' unknown to tf (" + error + ")");
+  if (!c.remove && !c.frame.empty()) {
+    const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(settings_.tf_timeout);
+    while (!tf_.canTransform(settings_.frame_id, c.frame, ros::Time(0), &error) && ros::WallTime::now() < end)
+      ros::WallDuration(0.005).sleep();
+    if (!tf_.canTransform(settings_.frame_id, c.frame, ros::Time(0), &error))
+      return reject_("instrument_command " + c.name + ": frame '" + c.frame + "' unknown to tf (" + error + ")");
+    error.clear();
+  }
   std::unique_lock<std::mutex> lock(mutex_);
   const auto it = tracked_.find(c.name);
   const bool exists = it != tracked_.end() && !it->second.removed;
@@ -273,8 +280,9 @@ bool RosInstruments::apply(LiverModel& model) {
       t.stale = true;
       if (!settings_.hold_stale) {
         t.pose_changed = true;
-        reject_("instrument " + name + ": no pose for " + std::to_string(settings_.pose_timeout) +
-                " s; withdrawn until the next");
+        std::ostringstream why;
+        why << "instrument " << name << ": no pose for " << settings_.pose_timeout << " s; withdrawn until the next";
+        warn_(why.str());
       }
     }
     if (t.index >= 0 && !t.shape_changed && !t.pose_changed) {

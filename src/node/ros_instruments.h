@@ -37,10 +37,12 @@ class RosInstruments {
   };
 
   // Subscribes instrument_command and the pose topics of the tool, the frames' instruments and
-  // the model's own; `reject` reports a refused input (called with no lock of this class held).
+  // the model's own. `reject` reports a refused input, `warn` an event (a stale instrument); they
+  // may be called under this class's lock and must not call back into it.
   // Throws std::invalid_argument for invalid settings.
   RosInstruments(ros::NodeHandle& nh, ros::NodeHandle& pnh, tf2_ros::Buffer& tf, LiverModel& model,
-                 const Settings& settings, std::function<void(const std::string&)> reject);
+                 const Settings& settings, std::function<void(const std::string&)> reject,
+                 std::function<void(const std::string&)> warn);
 
   // Simulation thread. Moves staged declarations, poses and tf frames into the model, withdraws
   // (or holds) stale instruments; true when the model's instruments changed.
@@ -90,7 +92,7 @@ class RosInstruments {
   tf2_ros::Buffer& tf_;
   tf2_ros::TransformBroadcaster tip_broadcaster_;
   Settings settings_;
-  std::function<void(const std::string&)> reject_;
+  std::function<void(const std::string&)> reject_, warn_;
   ros::Subscriber command_sub_;
   ros::Publisher wrench_pub_, marker_pub_;
 

@@ -1,0 +1,296 @@
+// rostest test/instruments.test: a grasper (closing, lifting, opening) and a probe at once, each
+// driven by its own tf frame, against the same scene solved by the core in this process. The
+// node's per-instrument wrench (instrument frame, at the tip) must equal the core's reaction
+// turned into that frame: publishing the model-frame force instead fails the probe's check (its
+// frame is tilted 30 degrees), as does a wrench taken from the other instrument.
+#include <geometry_msgs/PoseStamped.h>
+#include <geometry_msgs/WrenchStamped.h>
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "liver_sim/InstrumentCommand.h"
+#include "liver_sim/SimulationStatus.h"
+#include "liver_sim/liver_model.h"
+#include "wait_for.h"
+
+namespace {
+
+using liver_sim::InstrumentOptions;
+using liver_sim_test::wait_for;
+
+constexpr double kL = 0.015;  // the probe cube's edge (m)
+
+struct Tracker {  // the OR's tracking system: one tf frame per instrument, at 50 Hz
+  std::map<std::string, Eigen::Isometry3d> frames;
+  tf2_ros::TransformBroadcaster broadcaster;
+  void broadcast() {
+    for (const auto& [name, pose] : frames) {
+      geometry_msgs::TransformStamped t;
+      t.header.stamp = ros::Time::now();
+      t.header.frame_id = "liver";
+      t.child_frame_id = name;
+      const Eigen::Quaterniond q(pose.linear());
+      t.transform.translation.x = pose.translation().x();
+      t.transform.translation.y = pose.translation().y();
+      t.transform.translation.z = pose.translation().z();
+      t.transform.rotation.x = q.x();
+      t.transform.rotation.y = q.y();
+      t.transform.rotation.z = q.z();
+      t.transform.rotation.w = q.w();
+      broadcaster.sendTransform(t);
+    }
+  }
+};
+
+liver_sim::SimulationStatus status;
+std::vector<std::string> texts;  // status texts since the last clear
+std::map<std::string, geometry_msgs::WrenchStamped> wrenches;
+visualization_msgs::MarkerArray markers;
+
+// Waits for an idle status stamped well after `sent` (an input is applied within a frame).
+liver_sim::SimulationStatus settled(const ros::Time& sent) {
+  const ros::Time after = sent + ros::Duration(0.3);
+  EXPECT_TRUE(wait_for([&] { return status.header.stamp > after && status.state == "idle"; }, 120.0))
+      << "state " << status.state << ": " << status.text;
+  wait_for([] { return false; }, 0.3);  // the wrenches of the settled state
+  return status;
+}
+
+// The core's equilibrium for the same instruments (static scene: one step converges).
+void solve(liver_sim::LiverModel& model) {
+  for (int i = 0; i < 10; ++i)
+    if (model.step().converged()) return;
+  ADD_FAILURE() << "the core's reference did not converge";
+}
+
+// The node's wrench of `name` against the core's reaction of instrument k in the frame `pose`.
+void expect_wrench(const std::string& name, const liver_sim::LiverModel& model, int k, const Eigen::Isometry3d& pose,
+                   const std::string& stage) {
+  ASSERT_TRUE(wrenches.count(name)) << "no wrench of " << name;
+  const geometry_msgs::WrenchStamped& w = wrenches[name];
+  EXPECT_EQ(w.header.frame_id, name + "_tf");
+  const Eigen::Vector3d expected = pose.linear().transpose() * model.instrument_reaction(k).force;
+  const Eigen::Vector3d got(w.wrench.force.x, w.wrench.force.y, w.wrench.force.z);
+  EXPECT_LE((got - expected).norm(), 0.03 * expected.norm() + 1e-4)
+      << stage << ", " << name << ": node " << got.transpose() << " N, core " << expected.transpose() << " N";
+}
+
+TEST(Instruments, GrasperAndProbeFromTheirOwnFramesMatchTheCore) {
+  ros::NodeHandle nh;
+  auto s1 = nh.subscribe<liver_sim::SimulationStatus>(
+      "liver_sim/status", 10, boost::function<void(const liver_sim::SimulationStatus::ConstPtr&)>(
+                                  [](const liver_sim::SimulationStatus::ConstPtr& m) { status = *m; }));
+  std::vector<ros::Subscriber> wrench_subs;
+  for (std::string name : {"jaws", "tip"})
+    wrench_subs.push_back(nh.subscribe<geometry_msgs::WrenchStamped>(
+        "liver_sim/instruments/" + name + "/wrench", 10,
+        boost::function<void(const geometry_msgs::WrenchStamped::ConstPtr&)>(
+            [name](const geometry_msgs::WrenchStamped::ConstPtr& m) { wrenches[name] = *m; })));
+  auto s3 = nh.subscribe<visualization_msgs::MarkerArray>(
+      "liver_sim/instruments", 10, boost::function<void(const visualization_msgs::MarkerArray::ConstPtr&)>(
+                                       [](const visualization_msgs::MarkerArray::ConstPtr& m) { markers = *m; }));
+  ros::Publisher command = nh.advertise<liver_sim::InstrumentCommand>("instrument_command", 10);
+
+  // Jaws just above the top face near one edge (their 2.5 mm reach takes several nodes), and a
+  // 2 mm probe pressed 1.5 mm into the top face, its frame tilted 30 degrees about x.
+  Tracker tracker;
+  Eigen::Isometry3d jaws = Eigen::Isometry3d::Identity(), tip = Eigen::Isometry3d::Identity();
+  jaws.translation() << 0.004, 0.0075, kL + 0.0005;
+  tip.linear() = Eigen::AngleAxisd(M_PI / 6, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  tip.translation() << 0.011, 0.0075, kL + 0.002 - 0.0015;
+  tracker.frames = {{"jaws_tf", jaws}, {"tip_tf", tip}};
+  const ros::WallTimer timer =
+      nh.createWallTimer(ros::WallDuration(0.02), [&](const ros::WallTimerEvent&) { tracker.broadcast(); });
+  ASSERT_TRUE(wait_for([&] { return status.header.stamp.toSec() > 0 && command.getNumSubscribers() > 0; }, 60.0));
+
+  // The same scene in the core.
+  const liver_sim::Scene scene =
+      liver_sim::load_scene(std::string(LIVER_SIM_SOURCE_DIR) + "/config/scenes/probe_cube.yaml", {"contact.friction=0"});
+  liver_sim::LiverModel model(liver_sim::load_scene_mesh(scene), scene);
+  InstrumentOptions g, p;
+  g.name = "jaws";
+  g.type = InstrumentOptions::Type::Grasper;
+  g.radius = 0.0025;
+  p.name = "tip";
+  p.type = InstrumentOptions::Type::Probe;
+  p.radius = 0.002;
+  auto place = [](InstrumentOptions& o, const Eigen::Isometry3d& pose) {
+    o.position = pose.translation();
+    o.orientation = Eigen::Quaterniond(pose.linear());
+  };
+  place(g, jaws);
+  place(p, tip);
+  const int kg = model.add_instrument(g), kp = model.add_instrument(p);
+  solve(model);
+
+  ros::Time sent = ros::Time::now();
+  liver_sim::InstrumentCommand c;
+  c.name = "jaws";
+  c.type = "grasper";
+  c.radius = g.radius;
+  c.frame = "jaws_tf";
+  command.publish(c);
+  c = liver_sim::InstrumentCommand();
+  c.name = "tip";
+  c.type = "probe";
+  c.radius = p.radius;
+  c.frame = "tip_tf";
+  command.publish(c);
+  liver_sim::SimulationStatus s = settled(sent);
+  ASSERT_EQ(s.instrument_names.size(), 2u) << "jaws and tip posed; the default tool not";
+  std::map<std::string, int> contacts;
+  for (size_t i = 0; i < s.instrument_names.size(); ++i) contacts[s.instrument_names[i]] = s.instrument_contacts[i];
+  EXPECT_GT(contacts["tip"], 0);
+  EXPECT_EQ(contacts["tip"], model.instrument_reaction(kp).contacts);
+  expect_wrench("tip", model, kp, tip, "pressed");
+  EXPECT_GT(model.instrument_reaction(kp).force.norm(), 1e-3) << "the probe presses";
+  int adds = 0;
+  for (const auto& m : markers.markers) adds += m.action == visualization_msgs::Marker::ADD;
+  EXPECT_EQ(adds, 3 + 1) << "a grasper's two jaws and rod, a probe's sphere";
+
+  // Close, lift 2 mm, open: the tissue hangs on the jaws, then lets go.
+  struct Stage {
+    const char* name;
+    bool closed;
+    double lift;
+  };
+  for (const Stage& stage : {Stage{"closed", true, 0.0}, Stage{"lifted", true, 0.002}, Stage{"opened", false, 0.002}}) {
+    sent = ros::Time::now();
+    if (stage.lift != jaws.translation().z() - (kL + 0.0005)) {
+      jaws.translation().z() = kL + 0.0005 + stage.lift;
+      tracker.frames["jaws_tf"] = jaws;  // the timer broadcasts from this thread's spin
+    }
+    if (stage.closed != g.closed) {
+      c = liver_sim::InstrumentCommand();
+      c.name = "jaws";
+      c.grasp = stage.closed;
+      command.publish(c);
+    }
+    g.closed = stage.closed;
+    place(g, jaws);
+    model.update_instrument(kg, g);
+    solve(model);
+    s = settled(sent);
+    expect_wrench("jaws", model, kg, jaws, stage.name);
+    expect_wrench("tip", model, kp, tip, stage.name);
+    if (stage.lift > 0 && stage.closed)
+      EXPECT_LT(model.instrument_reaction(kg).force.z(), -1e-3) << "the lifted tissue pulls the jaws down";
+  }
+  EXPECT_EQ(model.instrument_reaction(kg).contacts, 0) << "opened jaws hold nothing";
+
+  // Removed, both leave the scene (their frames are still broadcast).
+  sent = ros::Time::now();
+  for (std::string name : {"jaws", "tip"}) {
+    c = liver_sim::InstrumentCommand();
+    c.name = name;
+    c.remove = true;
+    command.publish(c);
+  }
+  EXPECT_TRUE(settled(sent).instrument_names.empty());
+}
+
+// Each refused command names its field, is counted, and changes nothing (no step follows it).
+TEST(Instruments, RefusalsNameTheFieldAndChangeNothing) {
+  ros::NodeHandle nh;
+  auto sub = nh.subscribe<liver_sim::SimulationStatus>(
+      "liver_sim/status", 100, boost::function<void(const liver_sim::SimulationStatus::ConstPtr&)>(
+                                   [](const liver_sim::SimulationStatus::ConstPtr& m) {
+                                     status = *m;
+                                     if (!m->text.empty()) texts.push_back(m->text);
+                                   }));
+  ros::Publisher command = nh.advertise<liver_sim::InstrumentCommand>("instrument_command", 10);
+  ASSERT_TRUE(wait_for([&] { return command.getNumSubscribers() > 0 && status.state == "idle"; }, 60.0));
+  const liver_sim::SimulationStatus before = status;
+  auto refused = [&](const liver_sim::InstrumentCommand& c, const std::string& field) {
+    texts.clear();
+    const uint32_t n = status.rejected_inputs;
+    command.publish(c);
+    ASSERT_TRUE(wait_for([&] { return status.rejected_inputs == n + 1 && !texts.empty(); }, 10.0)) << field;
+    EXPECT_NE(texts.back().find(field), std::string::npos) << texts.back();
+  };
+  liver_sim::InstrumentCommand c;
+  c.name = "hook";
+  c.type = "scalpel";
+  refused(c, "type");
+  c.type = "probe";
+  c.radius = -0.001;
+  refused(c, "radius");
+  c.radius = std::nan("");
+  refused(c, "radius");
+  c = liver_sim::InstrumentCommand();
+  c.name = "sucker";
+  c.type = "tube";
+  c.suction = -100;
+  refused(c, "suction");
+  c.suction = 100;
+  c.frame = "no_such_frame";
+  refused(c, "no_such_frame");
+  c = liver_sim::InstrumentCommand();
+  c.name = "bad name";
+  c.type = "probe";
+  refused(c, "name");
+  c.name = "ghost";
+  c.type = "";
+  refused(c, "ghost");  // a change of an instrument that does not exist
+  wait_for([] { return false; }, 0.5);
+  EXPECT_EQ(status.step, before.step) << "a refused command made the model step";
+  EXPECT_EQ(status.instrument_names, before.instrument_names);
+}
+
+// The default tool, posed on its topic: a re-sent pose costs no step; when the poses stop it is
+// withdrawn after ~pose_timeout (1 s by default); once removed, its poses are not heard.
+TEST(Instruments, StalePosesWithdrawAndRemovedStaysOut) {
+  ros::NodeHandle nh;
+  auto sub = nh.subscribe<liver_sim::SimulationStatus>(
+      "liver_sim/status", 10, boost::function<void(const liver_sim::SimulationStatus::ConstPtr&)>(
+                                  [](const liver_sim::SimulationStatus::ConstPtr& m) { status = *m; }));
+  ros::Publisher pose_pub = nh.advertise<geometry_msgs::PoseStamped>("instruments/tool/pose", 1);
+  ros::Publisher command = nh.advertise<liver_sim::InstrumentCommand>("instrument_command", 10);
+  ASSERT_TRUE(wait_for([&] { return pose_pub.getNumSubscribers() > 0 && status.state == "idle"; }, 60.0));
+  auto has_tool = [] {
+    return std::find(status.instrument_names.begin(), status.instrument_names.end(), "tool") != status.instrument_names.end();
+  };
+  geometry_msgs::PoseStamped pose;
+  pose.header.frame_id = "liver";
+  pose.pose.position.x = 0.0075;
+  pose.pose.position.y = 0.003;
+  pose.pose.position.z = kL + 0.003 - 0.001;  // the 3 mm rod 1 mm into the top face
+  pose.pose.orientation.w = 1;
+  bool streaming = true;
+  const ros::WallTimer tracker = nh.createWallTimer(ros::WallDuration(0.05), [&](const ros::WallTimerEvent&) {
+    if (!streaming) return;
+    pose.header.stamp = ros::Time::now();
+    pose_pub.publish(pose);
+  });
+  const liver_sim::SimulationStatus pressed = settled(ros::Time::now());
+  ASSERT_TRUE(has_tool()) << "the streamed tool is in the scene";
+  wait_for([] { return false; }, 1.0);
+  EXPECT_EQ(status.step, pressed.step) << "the same pose, re-sent 20 times a second, made the model step";
+  streaming = false;
+  EXPECT_TRUE(wait_for([&] { return !has_tool(); }, 30.0)) << "the tool stayed after its poses stopped";
+  streaming = true;
+  EXPECT_TRUE(wait_for([&] { return has_tool(); }, 30.0)) << "a fresh pose brings it back";
+  liver_sim::InstrumentCommand c;
+  c.name = "tool";
+  c.remove = true;
+  command.publish(c);
+  EXPECT_TRUE(wait_for([&] { return !has_tool(); }, 30.0)) << "removed";
+  const liver_sim::SimulationStatus removed = settled(ros::Time::now());
+  EXPECT_FALSE(has_tool()) << "a pose after the removal brought the tool back";
+  EXPECT_EQ(removed.rejected_inputs, status.rejected_inputs);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "instruments_test");
+  return RUN_ALL_TESTS();
+}
