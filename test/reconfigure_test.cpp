@@ -176,15 +176,15 @@ TEST_F(Reconfigure, RatesBoundStepsAndMeshes) {
 // surface_alpha and color_scale_max: the mesh's opacity and how red a displacement is drawn.
 TEST_F(Reconfigure, DisplaySettingsChangeTheMesh) {
   press(0.0075, 0.0075, 0.002);
-  auto red_vertices = [] {
+  auto red_vertices = [] {  // at the colour ramp's end (dark red, no green), shaded
     int n = 0;
-    for (const auto& c : mesh_.colors) n += c.r > 0.99f && c.g < 0.01f;
+    for (const auto& c : mesh_.colors) n += c.r > 0.2f && c.g < 0.01f;
     return n;
   };
   set({{"color_scale_max", 0.2}, {"surface_alpha", 0.5}});
   unsigned seen = meshes_;
   wait_for([&] { return meshes_ > seen + 1; }, 10.0);
-  EXPECT_EQ(red_vertices(), 0) << "2 mm of 200 mm is blue";
+  EXPECT_EQ(red_vertices(), 0) << "2 mm of 200 mm is near the ramp's start";
   EXPECT_FLOAT_EQ(mesh_.colors.front().a, 0.5f);
   set({{"color_scale_max", 1e-4}, {"surface_alpha", 1.0}});
   seen = meshes_;
