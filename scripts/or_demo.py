@@ -113,7 +113,7 @@ class Instrument:
 
     def __init__(self, name, type_, radius, length=0.0):
         self.name = name
-        self.commands = rospy.Publisher("/instrument_command", InstrumentCommand, queue_size=10, latch=False)
+        self.commands = rospy.Publisher("/instrument_command", InstrumentCommand, queue_size=10)
         self.poses = rospy.Publisher(f"/instruments/{name}/pose", PoseStamped, queue_size=1)
         self.declaration = InstrumentCommand(name=name, type=type_, radius=radius, length=length)
         self.tip = None
