@@ -175,23 +175,24 @@ TEST_F(Reconfigure, RatesBoundStepsAndMeshes) {
 
 // surface_alpha and color_scale_max: the mesh's opacity and how red a displacement is drawn.
 TEST_F(Reconfigure, DisplaySettingsChangeTheMesh) {
+  set({{"pose_timeout", 0.0}});  // the tool stays when its poses stop
   press(0.0075, 0.0075, 0.002);
   auto red_vertices = [] {  // at the colour ramp's end (dark red, no green), shaded
     int n = 0;
     for (const auto& c : mesh_.colors) n += c.r > 0.2f && c.g < 0.01f;
     return n;
   };
-  set({{"color_scale_max", 0.2}, {"surface_alpha", 0.5}});
   unsigned seen = meshes_;
-  wait_for([&] { return meshes_ > seen + 1; }, 10.0);
+  set({{"color_scale_max", 0.2}, {"surface_alpha", 0.5}});
+  EXPECT_TRUE(wait_for([&] { return meshes_ > seen; }, 10.0)) << "a display change re-sends the mesh";
   EXPECT_EQ(red_vertices(), 0) << "2 mm of 200 mm is near the ramp's start";
   EXPECT_FLOAT_EQ(mesh_.colors.front().a, 0.5f);
-  set({{"color_scale_max", 1e-4}, {"surface_alpha", 1.0}});
   seen = meshes_;
-  wait_for([&] { return meshes_ > seen + 1; }, 10.0);
+  set({{"color_scale_max", 1e-4}, {"surface_alpha", 1.0}});
+  EXPECT_TRUE(wait_for([&] { return meshes_ > seen; }, 10.0)) << "a display change re-sends the mesh";
   EXPECT_GT(red_vertices(), 10) << "displacements over 0.1 mm are red";
   EXPECT_FLOAT_EQ(mesh_.colors.front().a, 1.0f);
-  set({{"color_scale_max", 0.005}});
+  set({{"color_scale_max", 0.005}, {"pose_timeout", 1.0}});
 }
 
 // friction: dragging the pressed tool sideways, the tissue resists along the drag with friction

@@ -13,6 +13,7 @@
 #include <std_srvs/Trigger.h>
 #include <tf2_geometry_msgs/tf2_geometry_msgs.h>
 #include <tf2_ros/buffer.h>
+#include <tf2_ros/static_transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
 #include <visualization_msgs/Marker.h>
 #include <visualization_msgs/MarkerArray.h>
@@ -133,6 +134,7 @@ class LiverSimNode {
              model_->capsule_triangles(), model_->num_beams(),
              scene.solver.mode == SolverOptions::Mode::Static ? "static" : "dynamic");
 
+    place_in_tf_tree(pnh);
     mesh_pub_ = pnh.advertise<visualization_msgs::Marker>("mesh", 1, true);
     vessel_pub_ = pnh.advertise<visualization_msgs::Marker>("vessels", 1, true);
     status_pub_ = pnh.advertise<SimulationStatus>("status", 10);
@@ -165,6 +167,32 @@ class LiverSimNode {
       std::lock_guard<std::mutex> lock(mutex_);
       pending_config_ = c;
     });
+  }
+
+  // ~parent_frame and ~parent_transform put the model frame in the OR's tf tree (a static
+  // transform, parent to model frame), so that rviz and the OR's tools agree on where it is.
+  void place_in_tf_tree(ros::NodeHandle& pnh) {
+    std::string parent;
+    std::vector<double> t{0, 0, 0, 0, 0, 0, 1};
+    pnh.param<std::string>("parent_frame", parent, "");
+    pnh.param("parent_transform", t, t);
+    if (parent.empty()) return;
+    if (t.size() != 7 || !std::all_of(t.begin(), t.end(), [](double v) { return std::isfinite(v); }) ||
+        !(std::abs(Eigen::Vector4d(t[3], t[4], t[5], t[6]).norm() - 1) < 1e-3))
+      throw std::invalid_argument("~parent_transform must be [x, y, z, qx, qy, qz, qw] (m; a unit quaternion)");
+    if (parent == frame_id_) throw std::invalid_argument("~parent_frame must differ from ~frame_id");
+    geometry_msgs::TransformStamped s;
+    s.header.stamp = ros::Time::now();
+    s.header.frame_id = parent;
+    s.child_frame_id = frame_id_;
+    s.transform.translation.x = t[0];
+    s.transform.translation.y = t[1];
+    s.transform.translation.z = t[2];
+    s.transform.rotation.x = t[3];
+    s.transform.rotation.y = t[4];
+    s.transform.rotation.z = t[5];
+    s.transform.rotation.w = t[6];
+    static_broadcaster_.sendTransform(s);
   }
 
   void run() {
@@ -278,6 +306,7 @@ class LiverSimNode {
     if (c.rate != rate_) loop = ros::WallRate(c.rate);
     rate_ = c.rate;
     publish_rate_ = c.publish_rate;
+    display_due_ |= color_scale_max_ != c.color_scale_max || surface_alpha_ != c.surface_alpha;
     color_scale_max_ = c.color_scale_max;
     surface_alpha_ = c.surface_alpha;
     instruments_->set_staleness(c.pose_timeout, c.hold_stale_instruments);
@@ -401,6 +430,7 @@ class LiverSimNode {
       covariances_.clear();
       for (const TargetUncertainty::Covariance& c : uncertainty_->covariances(*compliance_, registration_->cloud_springs()))
         covariances_.push_back(c.total);
+      display_due_ = true;
       analysis_stamp_ = ros::Time::now();
       const int held = registration_->estimate_supports(*compliance_);
       if (held >= 0) ROS_INFO("liver_sim: the clouds call for candidate support %d: held from the next cloud", held);
@@ -474,25 +504,46 @@ class LiverSimNode {
     s.target_radius_95 = largest_radius_95();
     for (bool held : registration_->supports_held()) s.supports_held += held;
     instruments_->fill_status(*model_, s);
+    const Eigen::Isometry3d& a = registration_->alignment();
+    s.rigid_alignment_active = a.matrix() != Eigen::Matrix4d::Identity();
+    const Eigen::Quaterniond q(a.linear());
+    s.rigid_alignment.translation.x = a.translation().x();
+    s.rigid_alignment.translation.y = a.translation().y();
+    s.rigid_alignment.translation.z = a.translation().z();
+    s.rigid_alignment.rotation.x = q.x();
+    s.rigid_alignment.rotation.y = q.y();
+    s.rigid_alignment.rotation.z = q.z();
+    s.rigid_alignment.rotation.w = q.w();
     {
       // A refusal or an event is told in the next status only: later ones say how the model is.
       std::lock_guard<std::mutex> lock(mutex_);
       s.rejected_inputs = rejected_;
-      s.text = r.message.empty() ? fresh_text_ : r.message;
+      s.text = r.message.empty() ? fresh_text_ : fresh_text_.empty() ? r.message : r.message + "; " + fresh_text_;
       fresh_text_.clear();
     }
     status_pub_.publish(s);
     instruments_->publish(*model_, s.header);
   }
 
+  // The surface, targets and vessels, when the shape, the display settings or the targets'
+  // uncertainty changed since they were last sent (latched: a late subscriber has them).
   void publish_mesh() {
+    // Displacements from the pre-operative equilibrium: the first converged state after start or
+    // reset; taking it recolours the mesh.
+    if (reference_.size() == 0 && last_.converged()) {
+      reference_ = model_->positions();
+      display_due_ = true;
+    }
+    if (!display_due_ && published_positions_.size() == model_->positions().size() &&
+        published_positions_ == model_->positions())
+      return;
+    published_positions_ = model_->positions();
+    display_due_ = false;
     marker_.header.frame_id = frame_id_;
     // The stamp of the instrument pose the shape reflects, so that latency can be measured.
     marker_.header.stamp = reflected_stamp_.isZero() ? ros::Time::now() : reflected_stamp_;
     marker_.ns = "liver";
     marker_.id = 0;
-    // Displacements from the pre-operative equilibrium: the first converged state after start or reset.
-    if (reference_.size() == 0 && last_.converged()) reference_ = model_->positions();
     fill_mesh_marker(*model_, reference_.size() ? reference_ : model_->positions(), color_scale_max_, surface_alpha_,
                      marker_);
     mesh_pub_.publish(marker_);
@@ -507,8 +558,8 @@ class LiverSimNode {
 
   // The tumour probes and vessel bifurcations where the model has them now: spheres (tumour
   // red, bifurcations blue; namespace "probes" or "bifurcations", id = the target's index, as in
-  // the poses) and their poses (orientation: identity). rviz flags text on a sphere, so the
-  // names are not in the markers (they are the scene's probe names, then the bifurcations).
+  // the poses) and their poses (orientation: identity); their names in markers of their own
+  // (rviz flags text on a sphere) and the colour legend.
   void publish_targets(const std_msgs::Header& header) {
     const std::vector<TrackedTarget> targets = tracked_targets(*model_);
     visualization_msgs::MarkerArray markers;
@@ -606,6 +657,7 @@ class LiverSimNode {
 
   tf2_ros::Buffer tf_buffer_;
   tf2_ros::TransformListener tf_listener_;
+  tf2_ros::StaticTransformBroadcaster static_broadcaster_;
   diagnostic_updater::Updater updater_;
   std::unique_ptr<LiverModel> model_;
   std::unique_ptr<RosInstruments> instruments_;
@@ -626,6 +678,8 @@ class LiverSimNode {
   visualization_msgs::Marker marker_, vessel_marker_;
 
   // Simulation thread only.
+  Eigen::VectorXd published_positions_;  // of the last mesh sent
+  bool display_due_ = true;
   StepResult last_;
   uint64_t steps_ = 0;
   std::string state_ = "idle";
