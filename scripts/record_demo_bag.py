@@ -7,7 +7,7 @@ registers. The surface is the phantom's equilibrium under gravity (solved by the
 `simulate` tool); the probe hides a 2 cm disc of it from the camera. Frames: everything in
 `liver` (the model frame). SI units.
 
-usage: scripts/record_demo_bag.py OUT.bag [--duration S]     (after scripts/run.sh built it)
+usage: rosrun liver_sim record_demo_bag.py OUT.bag [--duration S]   (after scripts/run.sh built it)
 play:  roslaunch liver_sim playback.launch bag:=$(pwd)/OUT.bag
 """
 import argparse
@@ -23,7 +23,8 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs import point_cloud2
 from std_msgs.msg import Header
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# The repository itself, also through the workspace's links (rosrun runs build/ws/src/liver_sim/scripts/...).
+REPO = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
 RADIUS = 0.0025   # m, probe tip radius (launch/liver_sim.launch's instrument_radius)
 SURFACE_Z = 0.039  # m, height of the sagged surface under the probe (static equilibrium)
 

@@ -1,5 +1,5 @@
 # Sourced by the scripts that talk to a ROS master next to the built workspace (measure_node.sh,
-# soak.sh, playback_screenshot.sh): Debian's Python first, the workspace's setup, a master URI on
+# soak.sh, screenshot.sh): Debian's Python first, the workspace's setup, a master URI on
 # the port given as $1. Sets REPO.
 set -euo pipefail
 REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)

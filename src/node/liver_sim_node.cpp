@@ -256,6 +256,7 @@ class LiverSimNode {
     if (reset) {
       model_->reset();  // also removes the registration's springs
       registration_->clear();
+      reference_.resize(0);
       instruments_->release_all(*model_);
       registering_ = false;
       clouds_registered_ = 0;
@@ -550,6 +551,12 @@ class LiverSimNode {
   // The surface, targets and vessels, when the shape, the display settings or the targets'
   // uncertainty changed since they were last sent (latched: a late subscriber has them).
   void publish_mesh() {
+    // Displacements from the pre-operative equilibrium: the first converged state after start or
+    // reset; taking it recolours the mesh.
+    if (reference_.size() == 0 && last_.converged()) {
+      reference_ = model_->positions();
+      display_due_ = true;
+    }
     if (!display_due_ && published_positions_.size() == model_->positions().size() &&
         published_positions_ == model_->positions())
       return;
@@ -560,7 +567,8 @@ class LiverSimNode {
     marker_.header.stamp = reflected_stamp_.isZero() ? ros::Time::now() : reflected_stamp_;
     marker_.ns = "liver";
     marker_.id = 0;
-    fill_mesh_marker(*model_, color_scale_max_, surface_alpha_, marker_);
+    fill_mesh_marker(*model_, reference_.size() ? reference_ : model_->positions(), color_scale_max_, surface_alpha_,
+                     marker_);
     mesh_pub_.publish(marker_);
     publish_targets(marker_.header);
     if (model_->num_beams() > 0) {
@@ -573,8 +581,8 @@ class LiverSimNode {
 
   // The tumour probes and vessel bifurcations where the model has them now: spheres (tumour
   // red, bifurcations blue; namespace "probes" or "bifurcations", id = the target's index, as in
-  // the poses) and their poses (orientation: identity). rviz flags text on a sphere, so the
-  // names are not in the markers (they are the scene's probe names, then the bifurcations).
+  // the poses) and their poses (orientation: identity); their names in markers of their own
+  // (rviz flags text on a sphere) and the colour legend.
   void publish_targets(const std_msgs::Header& header) {
     const std::vector<TrackedTarget> targets = tracked_targets(*model_);
     visualization_msgs::MarkerArray markers;
@@ -600,6 +608,10 @@ class LiverSimNode {
       markers.markers.push_back(m);
       poses.poses.push_back(m.pose);
     }
+    append_target_names(targets, header, markers);
+    const Eigen::MatrixX3d& rest = model_->mesh().V;
+    append_colour_legend(Eigen::AlignedBox3d(rest.colwise().minCoeff().transpose(), rest.colwise().maxCoeff().transpose()),
+                         color_scale_max_, header, markers);
     target_marker_pub_.publish(markers);
     target_pose_pub_.publish(poses);
     if (covariances_.size() != targets.size()) return;  // no analysis since the last reset
@@ -698,6 +710,7 @@ class LiverSimNode {
   std::string state_ = "idle";
   std::deque<ros::WallTime> step_times_;  // of the steps in the last second
   ros::Time reflected_stamp_;
+  Eigen::VectorXd reference_;  // m, 3 #V: the pre-operative equilibrium; empty until known
   uint64_t clouds_registered_ = 0;
   bool registering_ = false;  // the model is converging on the last cloud
   double registration_rms_ = 0;

@@ -45,9 +45,25 @@ const char* kUsage =
     "usage: bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]\n"
     "             [--frequency HZ] [--strategy STRATEGY[:ITERATIONS[:TOLERANCE]]]... [--threads N,...]\n"
     "             [--load N,...] [--realtime-priority P] [--csv FILE] [--quiet]\n"
-    "  strategies: newton_krylov, full_newton, full_newton_eigen, reused_factor_cg, cg, modified_newton\n"
-    "  --threads   solver.threads of the runs (default 1); --load: busy threads beside them (default 0)\n"
-    "  --realtime-priority  SCHED_FIFO priority (1-99) of the timed runs' threads (default 0: normal)\n";
+    "Times dynamic frames of solver.dt from the scene's static equilibrium, the scene's loads scaled\n"
+    "by 1 + A sin(2 pi f t), for each solver strategy, against a converged reference run.\n"
+    "  --scene FILE          YAML scene (README, 'Scene format'); required\n"
+    "  --instruments FILE    YAML file with an instruments: list in the scene format, moving along\n"
+    "                        their trajectories from the first frame (e.g. config/bench/*.yaml)\n"
+    "  --set K=V             override a scalar of the scene, e.g. --set solver.dt=0.001 (repeatable)\n"
+    "  --frames N            timed frames per run, >= 1 (default 100)\n"
+    "  --amplitude A         relative amplitude of the breathing loads (default 0.5)\n"
+    "  --frequency HZ        their frequency (Hz, default 1)\n"
+    "  --strategy SPEC       a run (repeatable, at least one): STRATEGY is one of newton_krylov,\n"
+    "                        full_newton, full_newton_eigen, reused_factor_cg, cg, modified_newton;\n"
+    "                        ITERATIONS the Newton iterations per frame (default 30); TOLERANCE the\n"
+    "                        residual tolerance (default 1e-6; 0: always ITERATIONS)\n"
+    "  --threads N,...       solver.threads of the runs, each in [1, 64] (default 1)\n"
+    "  --load N,...          busy threads beside the runs, one run per count (default 0)\n"
+    "  --realtime-priority P SCHED_FIFO priority (1-99) of the timed runs' threads (default 0: normal)\n"
+    "  --csv FILE            write the CSV rows (one per run) to FILE instead of standard output\n"
+    "  --quiet               no progress on standard error\n"
+    "  --help                this text\n";
 
 struct Spec {
   std::string text, strategy;
@@ -265,6 +281,11 @@ int main_checked(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i)
+    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") {
+      std::cout << kUsage;
+      return 0;
+    }
   try {
     return main_checked(argc, argv);
   } catch (const std::exception& e) {

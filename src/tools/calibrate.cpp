@@ -55,7 +55,8 @@ const char* kUsage =
     "  --measured IN.csv     fit the parenchyma, then the capsule Young's modulus to these data\n"
     "  --start-parenchyma E0, --start-capsule E0   search starts (Pa; default: the scene's)\n"
     "  --expect-parenchyma E, --expect-capsule E   known moduli (Pa): exit 3 when a fit is off by\n"
-    "  --tolerance REL       more than REL relative (default 0.01)\n";
+    "  --tolerance REL       more than REL relative (default 0.01)\n"
+    "  --help                this text\n";
 
 const char* kHeader = "stage,load_scale,probe,ux,uy,uz";
 
@@ -483,6 +484,11 @@ int run(const Options& opt) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i)
+    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") {
+      std::cout << kUsage;
+      return 0;
+    }
   Options opt;
   const std::string error = parse_args(argc, argv, &opt);
   if (!error.empty()) {

@@ -47,8 +47,29 @@ const char* kUsage =
     "                      [--sensor depth|surface] [--frames N] [--repeats R] [--noise M,...]\n"
     "                      [--visible FRACTION,...] [--outliers FRACTION,...] [--stiffness SCALE,...]\n"
     "                      [--attachments model|truth] [--supports estimate|off] [--camera-motion DEG]\n"
-    "                      [--csv FILE]"
-    "                      [--targets-csv FILE] [--quiet]\n";
+    "                      [--csv FILE] [--targets-csv FILE] [--quiet]\n"
+    "Registers the model to synthetic clouds of a deforming truth, frame by frame; one CSV row per\n"
+    "combination of the lists (target registration errors before and after, time per frame).\n"
+    "  --scene FILE            the model's YAML scene (README, 'Scene format'); required\n"
+    "  --set K=V               override a scalar of the model's scene (repeatable)\n"
+    "  --truth-scene FILE      an independent truth (scripts/make_truth_phantom.py); default: the\n"
+    "                          model's own scene (the inverse crime)\n"
+    "  --scenario NAME,...     the truth's load: lift, press, breathing, pneumoperitoneum (default lift)\n"
+    "  --sensor depth|surface  a depth camera (occlusion, holes, instruments, blood) or uniform\n"
+    "                          surface samples (default depth)\n"
+    "  --frames N              frames over which the load ramps to full, >= 1 (default 10)\n"
+    "  --repeats R             runs of each case with other random clouds, >= 1 (default 1)\n"
+    "  --noise M,...           depth noise at 25 cm (m, standard deviation; default 0.001)\n"
+    "  --visible FRACTION,...  share of the surface area in the sensor's view, in (0, 1] (default 0.3)\n"
+    "  --outliers FRACTION,... surface sensor: share of uniform outlier points (default 0)\n"
+    "  --stiffness SCALE,...   the model's parenchyma Young's modulus times SCALE, > 0 (default 1)\n"
+    "  --attachments model|truth  the model keeps its own attachments or gets the truth's (default model)\n"
+    "  --supports estimate|off    hold the candidate supports the clouds call for, or never (default estimate)\n"
+    "  --camera-motion DEG     the camera sways by +-DEG about the vertical through the liver (default 0)\n"
+    "  --csv FILE              write the rows to FILE instead of standard output\n"
+    "  --targets-csv FILE      write every target's error at the last frame of every run\n"
+    "  --quiet                 no progress on standard error\n"
+    "  --help                  this text\n";
 
 template <typename T, typename Parse>
 std::vector<T> list(const std::string& s, Parse parse) {
@@ -197,6 +218,11 @@ Stats stats(std::vector<double> v) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i)
+    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") {
+      std::cout << kUsage;
+      return 0;
+    }
   Options opt;
   try {
     opt = parse(argc, argv);

@@ -31,7 +31,9 @@ const char* kUsage =
     "  --threads N    threads of the element loops (solver.threads, default 1; results do not change)\n"
     "  --vtu FILE     write the final mesh with its displacement field (VTK XML)\n"
     "  --csv FILE     write the probe displacements after every step\n"
-    "  --quiet        no progress on standard error\n";
+    "  --quiet        no progress on standard error\n"
+    "  --help         this text\n"
+    "Exit status: 0 done, 1 bad input, 2 bad command line, 3 a step diverged.\n";
 
 struct Options {
   std::string scene, vtu, csv;
@@ -195,6 +197,11 @@ int run(const Options& opt) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i)
+    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") {
+      std::cout << kUsage;
+      return 0;
+    }
   Options opt;
   if (!parse_args(argc, argv, &opt)) {
     std::cerr << kUsage;

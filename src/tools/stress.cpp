@@ -283,13 +283,28 @@ std::vector<Case> cases() {
 
 }  // namespace
 
+const char* kUsage =
+    "usage: stress [--quick] [--group NAME] [--set K=V]... [--scene FILE] [--csv FILE]\n"
+    "Runs the numerical stress matrix; a Markdown table on standard output; exit status 0 when every\n"
+    "case ended as expected, 1 otherwise, 2 on a bad command line.\n"
+    "  --quick       the reduced matrix of the tests\n"
+    "  --group NAME  the cases of one group: 'capsule stiffness', 'Poisson ratio', 'time step',\n"
+    "                'element quality', inversion, '100 kPa step', contact\n"
+    "  --set K=V     a scene override applied to every case after its own (repeatable)\n"
+    "  --scene FILE  replaces the default scene (the aspiration cube)\n"
+    "  --csv FILE    also write the rows as CSV\n"
+    "  --help        this text\n";
+
 int main(int argc, char** argv) {
   bool quick = false;
   std::string scene = LIVER_SIM_ASPIRATION_SCENE, csv, group;
   std::vector<std::string> extra;  // --set K=V, after each case's own overrides
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--quick") {
+    if (a == "--help" || a == "-h") {
+      std::cout << kUsage;
+      return 0;
+    } else if (a == "--quick") {
       quick = true;
     } else if (a == "--scene" && i + 1 < argc) {
       scene = argv[++i];
@@ -300,7 +315,7 @@ int main(int argc, char** argv) {
     } else if (a == "--set" && i + 1 < argc) {
       extra.push_back(argv[++i]);
     } else {
-      std::cerr << "usage: stress [--quick] [--group NAME] [--set K=V]... [--scene FILE] [--csv FILE]\n";
+      std::cerr << kUsage;
       return 2;
     }
   }

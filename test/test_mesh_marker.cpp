@@ -1,0 +1,168 @@
+// The node's markers (src/node/mesh_marker.h) on a box, whose normals and displacements are
+// known without the code under test: shading, the displacement reference, the back-to-front
+// order of a translucent surface, target names and the colour legend.
+#include <gtest/gtest.h>
+
+#include <map>
+#include <set>
+
+#include "../src/node/mesh_marker.h"
+#include "liver_sim/mesh.h"
+#include "regions.h"
+
+namespace liver_sim {
+namespace {
+
+constexpr double kSide = 0.02;  // m
+
+LiverModel box_model() {
+  Scene s;
+  s.fixed.push_back(box({-1, -1, -1}, {1, 1, 0}));  // the bottom face: a model must be held
+  return LiverModel(make_box_mesh({kSide, kSide, kSide}, {2, 2, 2}), s);
+}
+
+// The outward unit normal of the box face a point lies on, zero on an edge or a corner.
+Eigen::Vector3d face_normal(const Eigen::Vector3d& p) {
+  Eigen::Vector3d n = Eigen::Vector3d::Zero();
+  int faces = 0;
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(p[a]) < 1e-12) n[a] = -1, ++faces;
+    if (std::abs(p[a] - kSide) < 1e-12) n[a] = 1, ++faces;
+  }
+  return faces == 1 ? n : Eigen::Vector3d::Zero();
+}
+
+TEST(MeshMarker, VertexNormalsAreTheBoxFacesNormals) {
+  const LiverModel model = box_model();
+  const Eigen::MatrixX3d n = vertex_normals(model.boundary(), model.positions());
+  int checked = 0;
+  for (int i = 0; i < n.rows(); ++i) {
+    const Eigen::Vector3d expected = face_normal(model.positions().segment<3>(3 * i));
+    if (expected.isZero()) continue;
+    EXPECT_TRUE(n.row(i).transpose().isApprox(expected, 1e-12)) << "node " << i << ": " << n.row(i);
+    ++checked;
+  }
+  EXPECT_EQ(checked, 6);  // the centre of each face (2 x 2 x 2 hexahedra)
+}
+
+TEST(MeshMarker, ColourIsTheDisplacementFromTheReferenceShadedByTheLight) {
+  const LiverModel model = box_model();
+  const double scale = 0.005;
+  Eigen::VectorXd reference = model.positions();
+  for (int i = 0; i < reference.size(); i += 3) reference[i + 2] -= 2 * scale;  // every node 10 mm up from it: red
+  visualization_msgs::Marker marker;
+  fill_mesh_marker(model, reference, scale, 1.0, marker);
+  ASSERT_EQ(marker.points.size(), 3 * static_cast<size_t>(model.boundary().rows()));
+  ASSERT_EQ(marker.colors.size(), marker.points.size());
+  const std_msgs::ColorRGBA moved = displacement_colour(1.0, scale);  // beyond the scale's end
+  std::set<double> lights;
+  for (size_t k = 0; k < marker.points.size(); ++k) {
+    const Eigen::Vector3d p(marker.points[k].x, marker.points[k].y, marker.points[k].z);
+    const std_msgs::ColorRGBA& c = marker.colors[k];
+    EXPECT_EQ(c.a, 1.0f);
+    const Eigen::Vector3d n = face_normal(p);
+    if (n.isZero()) continue;
+    // A face centre: lit by its face's normal; faces turned away get the ambient share only.
+    const double light = 0.35 + 0.65 * std::max(0.0, n.dot(Eigen::Vector3d(0.24, -0.82, 0.52).normalized()));
+    EXPECT_NEAR(c.r, moved.r * light, 1e-6) << "at " << p.transpose();
+    EXPECT_NEAR(c.g, moved.g * light, 1e-6);
+    EXPECT_NEAR(c.b, moved.b * light, 1e-6);
+    lights.insert(light);
+  }
+  EXPECT_GE(lights.size(), 3u);  // the lit faces differ: the shape shows
+
+  // Against itself as reference: no displacement, the ramp's start (shaded).
+  fill_mesh_marker(model, model.positions(), scale, 1.0, marker);
+  const std_msgs::ColorRGBA still = displacement_colour(0.0, scale);
+  for (const std_msgs::ColorRGBA& c : marker.colors) EXPECT_NEAR(c.g / c.r, still.g / still.r, 1e-6);
+}
+
+TEST(MeshMarker, RampRunsFromTissueToDarkRed) {
+  const std_msgs::ColorRGBA still = displacement_colour(0.0, 0.005), full = displacement_colour(0.005, 0.005);
+  EXPECT_TRUE(still.r > 0.5 && still.g > 0.5 && still.b > 0.5) << "pale, so that the shading shows";
+  EXPECT_TRUE(full.r > 0.5 && full.g == 0) << "red";
+  const std_msgs::ColorRGBA beyond = displacement_colour(1.0, 0.005), nan = displacement_colour(NAN, 0.005);
+  EXPECT_TRUE(beyond.r == full.r && beyond.g == full.g && beyond.b == full.b);
+  EXPECT_TRUE(nan.r == full.r && nan.g == full.g && nan.b == full.b);
+  double previous_g = 2;  // the green share falls from yellow on: warmer with more motion
+  for (double u = 0.00125; u <= 0.005; u += 0.00125) {
+    EXPECT_LT(displacement_colour(u, 0.005).g, previous_g);
+    previous_g = displacement_colour(u, 0.005).g;
+  }
+}
+
+TEST(MeshMarker, TranslucentSurfaceIsOrderedBackToFrontForTheViewer) {
+  const LiverModel model = box_model();
+  visualization_msgs::Marker opaque, translucent;
+  fill_mesh_marker(model, model.positions(), 0.005, 1.0, opaque);
+  fill_mesh_marker(model, model.positions(), 0.005, 0.3, translucent);
+  ASSERT_EQ(translucent.points.size(), opaque.points.size());
+  const Eigen::Vector3d view(0.24, -0.82, 0.52);  // config/liver_sim.rviz's viewer
+  double previous = -1e9;
+  std::multiset<std::vector<double>> a, b;  // the same triangles, in another order
+  for (size_t t = 0; t < translucent.points.size(); t += 3) {
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    std::vector<double> ta, tb;
+    for (int k = 0; k < 3; ++k) {
+      const auto& p = translucent.points[t + k];
+      const auto& q = opaque.points[t + k];
+      centroid += Eigen::Vector3d(p.x, p.y, p.z) / 3;
+      ta.insert(ta.end(), {p.x, p.y, p.z});
+      tb.insert(tb.end(), {q.x, q.y, q.z});
+      EXPECT_FLOAT_EQ(translucent.colors[t + k].a, 0.3f);
+    }
+    const double depth = centroid.dot(view.normalized());
+    EXPECT_GE(depth, previous - 1e-12) << "triangle " << t / 3 << " is nearer the viewer than the next";
+    previous = depth;
+    a.insert(ta);
+    b.insert(tb);
+  }
+  EXPECT_EQ(a, b);
+}
+
+TEST(MeshMarker, TargetNamesAndLegend) {
+  std::vector<TrackedTarget> targets = {{"tumour_centre", TrackedTarget::Kind::Probe, {0.05, -0.02, 0.005}},
+                                        {"portal bifurcation 3", TrackedTarget::Kind::Bifurcation, {0, 0, 0}}};
+  std_msgs::Header header;
+  header.frame_id = "liver";
+  visualization_msgs::MarkerArray markers;
+  append_target_names(targets, header, markers);
+  ASSERT_EQ(markers.markers.size(), 2u);
+  for (size_t i = 0; i < 2; ++i) {
+    const visualization_msgs::Marker& m = markers.markers[i];
+    EXPECT_EQ(m.ns, "target_names");
+    EXPECT_EQ(m.id, static_cast<int>(i));
+    EXPECT_EQ(m.type, visualization_msgs::Marker::TEXT_VIEW_FACING);
+    EXPECT_EQ(m.text, targets[i].name);
+    EXPECT_NEAR(m.pose.position.z, targets[i].position.z() + 0.004, 1e-12);
+    EXPECT_EQ(m.header.frame_id, "liver");
+  }
+
+  markers.markers.clear();
+  const Eigen::AlignedBox3d box(Eigen::Vector3d(-0.1, -0.05, -0.03), Eigen::Vector3d(0.1, 0.05, 0.06));
+  append_colour_legend(box, 0.008, header, markers);
+  std::vector<const visualization_msgs::Marker*> cubes;
+  std::vector<std::string> texts;
+  for (const visualization_msgs::Marker& m : markers.markers) {
+    EXPECT_EQ(m.ns, "legend");
+    if (m.type == visualization_msgs::Marker::CUBE) cubes.push_back(&m);
+    if (m.type == visualization_msgs::Marker::TEXT_VIEW_FACING) texts.push_back(m.text);
+    EXPECT_GT(m.pose.position.x, box.max().x());  // beside the model, not in it
+  }
+  ASSERT_GE(cubes.size(), 2u);
+  std::set<int> ids;
+  for (const visualization_msgs::Marker& m : markers.markers) ids.insert(m.id);
+  EXPECT_EQ(ids.size(), markers.markers.size());
+  // Bottom: no displacement; top: the scale's end; rising in between.
+  const std_msgs::ColorRGBA still = displacement_colour(0.0, 0.008), full = displacement_colour(0.008, 0.008);
+  EXPECT_TRUE(cubes.front()->color.r == still.r && cubes.front()->color.g == still.g && cubes.front()->color.b == still.b);
+  EXPECT_TRUE(cubes.back()->color.r == full.r && cubes.back()->color.g == full.g && cubes.back()->color.b == full.b);
+  for (size_t k = 1; k < cubes.size(); ++k) EXPECT_GT(cubes[k]->pose.position.z, cubes[k - 1]->pose.position.z);
+  EXPECT_NE(std::find(texts.begin(), texts.end(), "0"), texts.end());
+  EXPECT_NE(std::find(texts.begin(), texts.end(), "4"), texts.end());
+  EXPECT_NE(std::find(texts.begin(), texts.end(), ">= 8"), texts.end());
+  EXPECT_NE(std::find(texts.begin(), texts.end(), "displacement (mm)"), texts.end());
+}
+
+}  // namespace
+}  // namespace liver_sim
