@@ -218,8 +218,10 @@ def main():
     with session.lock:
         tumour_preop = session.targets[0].copy()
     preop = session.triangles()
+    # The right lobe holds the tumour: its side of the model frame's x (the patient's right).
+    side = 1.0 if tumour_preop[0] > 0 else -1.0
     # The intra-operative liver the camera sees: up to 3 mm higher over the right lobe.
-    lift = 3e-3 * np.exp(-np.sum((preop[..., :2] - [0.06, -0.03]) ** 2, axis=-1) / (2 * 0.04**2))
+    lift = 3e-3 * np.exp(-np.sum((preop[..., :2] - [side * 0.06, -0.03]) ** 2, axis=-1) / (2 * 0.04**2))
     truth = preop.copy()
     truth[..., 2] += lift
     camera = Camera(truth, rng)
@@ -228,7 +230,7 @@ def main():
     grasper = Instrument("grasper", "grasper", JAW_RADIUS)
     probe = Instrument("probe", "shaft", PROBE_RADIUS, 0.1)  # a rod with a rounded tip: no tissue closes over it
     time.sleep(1.0)  # subscriptions connect
-    grasper_dir = np.array([1.0, 0.0, 1.0]) / math.sqrt(2)  # from the side, above
+    grasper_dir = np.array([side, 0.0, 1.0]) / math.sqrt(2)  # from the side, above
     probe_dir = np.array([0.0, 0.0, 1.0])
 
     # Timeline (s of session time): phase boundaries.
@@ -268,7 +270,7 @@ def main():
             if T_GRASP <= t < T_AWAY:
                 if edge is None:
                     v = session.triangles().reshape(-1, 3)
-                    edge = v[np.argmax(v[:, 0])]
+                    edge = v[np.argmax(side * v[:, 0])]
                     grasper.declare()
                 away = edge + 0.03 * grasper_dir
                 if t < T_CLOSE - 0.5:
