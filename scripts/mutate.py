@@ -41,6 +41,7 @@ TESTS = [
     ("test_model", [FAIL_FAST, "--gtest_filter=-*OneIterationPerHapticFrame*:SofaLiver*"]),
     ("test_contact", [FAIL_FAST, "--gtest_filter=-Hertz*"]),
     ("test_vessels", [FAIL_FAST, "--gtest_filter=-LiverPhantom*:*VascularisedLiver*"]),
+    ("test_robustness", [FAIL_FAST]),
     ("stress", ["--quick"]),
 ]
 
@@ -306,6 +307,23 @@ MUTATIONS = [
       "for (int t = 0; t <= s; ++t)",
       "for (int t = 0; t < s; ++t)",
       "a contact node's own compliance block left out (off by one)"),
+    # --- rollback and time budget (newton_stepper.cpp) ---
+    M("R1", "src/core/newton_stepper.cpp",
+      "  mechanics_.restore(s.mechanics);\n  contact_.restore(s.contact);",
+      "  mechanics_.restore(s.mechanics);",
+      "a rollback leaves the contacts, poses and reactions of the failed step"),
+    M("R2", "src/core/newton_stepper.cpp",
+      "  mechanics_.restore(s.mechanics);\n  contact_.restore(s.contact);",
+      "  contact_.restore(s.contact);",
+      "a rollback leaves the rotations and warm starts of the failed step"),
+    M("R3", "src/core/newton_stepper.cpp",
+      "if (result.iterations > 0 && Clock::now() > deadline_) {",
+      "if (Clock::now() > deadline_) {",
+      "out of time before the step's first iteration (no frame moves on)"),
+    M("R4", "src/core/newton_stepper.cpp",
+      "if (k > 1 && Clock::now() > deadline_) {",
+      "if (k > 1 && false) {",
+      "out of time between stages ignored (the instruments reach their target, the tissue does not)"),
 ]
 
 

@@ -16,28 +16,6 @@ namespace {
 
 std::string phantom_scene() { return std::string(LIVER_SIM_SOURCE_DIR) + "/config/scenes/liver_phantom.yaml"; }
 
-TEST(ClosestOnTriangle, MatchesDenseSampling) {
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<double> u(-1, 1);
-  for (int trial = 0; trial < 200; ++trial) {
-    const Eigen::Vector3d a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng)), c(u(rng), u(rng), u(rng));
-    const Eigen::Vector3d p = 2 * Eigen::Vector3d(u(rng), u(rng), u(rng));
-    const Eigen::Vector3d w = closest_on_triangle(p, a, b, c);
-    EXPECT_NEAR(w.sum(), 1.0, 1e-12);
-    EXPECT_GE(w.minCoeff(), -1e-12);
-    const double d = (p - (w[0] * a + w[1] * b + w[2] * c)).norm();
-    // No sample of the triangle is closer (a 200 x 200 barycentric grid).
-    double sampled = std::numeric_limits<double>::infinity();
-    for (int i = 0; i <= 200; ++i)
-      for (int j = 0; i + j <= 200; ++j) {
-        const double s = i / 200.0, t = j / 200.0;
-        sampled = std::min(sampled, (p - ((1 - s - t) * a + s * b + t * c)).norm());
-      }
-    EXPECT_LE(d, sampled + 1e-12);
-    EXPECT_GE(d, sampled - 0.02);  // the grid's spacing bounds how far it can be off
-  }
-}
-
 TEST(SurfaceLocator, FindsTheClosestTriangleExactly) {
   const Scene scene = load_scene(phantom_scene());
   const LiverModel model(load_scene_mesh(scene), scene);

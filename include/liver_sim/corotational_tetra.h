@@ -53,6 +53,22 @@ class CorotationalTetra {
   // step ago (continued); else they are only recorded. The guesses change, the results do not
   // (to round-off): one iteration then suffices where the rotation changed by more than ~1e-5.
   void predict_rotations(bool continued);
+  // The rotations and the polar iterations' warm starts, saved and restored as one (a step that
+  // is rolled back leaves them as they were before it, to the last bit).
+  struct RotationState {
+    std::vector<Eigen::Matrix3d> R;
+    std::vector<Eigen::Quaterniond> q, q_step;
+  };
+  void save_rotations(RotationState& s) const {
+    s.R = R_;
+    s.q = q_;
+    s.q_step = q_step_;
+  }
+  void restore_rotations(const RotationState& s) {
+    R_ = s.R;
+    q_ = s.q;
+    q_step_ = s.q_step;
+  }
 
   // Element internal force (12, the force the element needs to be held in shape x); updates
   // the element's rotation to x first. Returns the strain energy 1/2 u^T K0 u of the corotated

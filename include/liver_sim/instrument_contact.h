@@ -57,8 +57,8 @@ class InstrumentContact {
 
   // Instruments are rigid and pose-driven, in unilateral contact with Coulomb friction with the
   // surface, or holding it (a closed grasper). add/update throw std::invalid_argument naming the
-  // field at fault (validate(InstrumentOptions)); a change acts at the next step. `time` places
-  // an instrument with a trajectory.
+  // field at fault (validate(InstrumentOptions)), or, beyond kMaxInstruments, the count; a change
+  // acts at the next step. `time` places an instrument with a trajectory.
   int add_instrument(const InstrumentOptions& o, double time);
   void update_instrument(int i, const InstrumentOptions& o);
   int num_instruments() const { return static_cast<int>(instruments_.size()); }
@@ -95,8 +95,8 @@ class InstrumentContact {
   //                                 so that no surface point is caught deep inside it)
   //   begin_stage(k, stages, x)     the poses of stage k (1-based); slips are measured from x
   //   detect(x), violation(x), direct_update(...) or krylov_update(...) within the Newton iterations
-  //   end_step(rolled_back, x)      the forces of the step's start again when it was rolled
-  //                                 back; the reactions at x
+  //   end_step(x)                   the reactions at x
+  // A step that is rolled back restores what save() took before it instead (restore).
   int begin_step(double t, const Eigen::VectorXd& x);
   void begin_stage(int k, int stages, const Eigen::VectorXd& x);
   // The contacts at x: the surface points within the alarm distance of an instrument and the
@@ -131,8 +131,15 @@ class InstrumentContact {
   void scale_update(double alpha);
   // Adds to f the change of the contact forces the last update made, in the detection frames.
   void add_force_change(Eigen::VectorXd& f) const;
-  void end_step(bool rolled_back, const Eigen::VectorXd& x);
+  void end_step(const Eigen::VectorXd& x);
   int loaded_contacts() const;  // contacts carrying force
+
+  // Everything a step changes here: each instrument (pose, staging, grasp, reaction), the
+  // contacts (the active set, forces, frames, rows), the tubes' suction loads. The stepper saves
+  // it before a step and restores it when the step is rolled back.
+  struct State;
+  void save(State& s) const;
+  void restore(const State& s);
 
   // No contact, no force; graspers let go (they grasp again at the next step if still closed).
   void reset();
@@ -149,6 +156,17 @@ class InstrumentContact {
     int suction_load = -1;                     // tube: its pressure load in the mechanical model
     InstrumentReaction reaction;
   };
+
+ public:
+  struct State {
+    std::vector<Instrument> instruments;
+    std::vector<Contact> contacts;
+    std::vector<PressureLoad> suction;  // of the tubes, in instrument order
+    Eigen::VectorXd x_stage;
+    std::vector<Eigen::Isometry3d> stage_from, stage_to;
+  };
+
+ private:
   // Normal gap and tangential slips (bilateral: position error) of contact c at x (m), and
   // its frame (columns: normal, tangents).
   Eigen::Vector3d contact_rows(const Contact& c, const Eigen::VectorXd& x, Eigen::Matrix3d* frame) const;
@@ -182,7 +200,6 @@ class InstrumentContact {
   std::vector<Eigen::Isometry3d> stage_from_, stage_to_;
   Eigen::VectorXd x_stage_;  // positions at the start of the stage: slips are measured from them
   std::vector<Contact> contacts_, contacts_next_;
-  std::vector<Contact> contacts_start_;  // at the step's start, restored by a rollback
   std::vector<Eigen::Vector3d> lambda_before_update_, lambda_of_update_;  // per contact
   NodeCompliance compliance_;
   long solves_ = 0;

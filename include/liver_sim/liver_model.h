@@ -25,6 +25,9 @@ namespace liver_sim {
 // Builds the mesh a scene asks for (box or file). Throws MeshError / SceneError.
 TetMesh load_scene_mesh(const Scene& scene);
 
+// a and b hold the same bits (NaN equals NaN, -0 differs from +0).
+bool same_bits(const std::vector<double>& a, const std::vector<double>& b);
+
 class LiverModel {
  public:
   // Builds the parts; throws std::invalid_argument naming the problem (invalid option, region
@@ -66,6 +69,19 @@ class LiverModel {
   // The next Newton iteration factorises the matrix afresh (a retry after a step that stalled
   // on an older factor).
   void refactorize() { stepper_.refactorize(); }
+
+  // Back to the state before the last step (NewtonStepper::undo_step): right after a step whose
+  // result the caller cannot use. False, and nothing changed, when there is none.
+  bool undo_step() { return stepper_.undo_step(); }
+
+  // Every number of the state that a user or a test can read, in one vector: positions,
+  // velocities, the last step's start, time, each instrument's pose and reaction, every contact
+  // (point, force, frame, rows), the pressure loads (the tubes' suction), the element rotations
+  // and their warm starts. A rolled-back step leaves it as it was, to the last bit
+  // (same_bits). Gathered through the parts' accessors, apart from the rollback's own copy.
+  std::vector<double> observable_state() const;
+  // True when every value is finite (the node's check of a step's result).
+  bool finite_state() const;
 
   // Back to the rest shape, zero velocity, time 0; parameters and instruments are kept (a
   // grasper lets go; it grasps again at the next step if it is still closed); no springs.

@@ -103,6 +103,8 @@ class MechanicalModel {
   // index for pressure_load().
   int add_pressure_load();
   PressureLoad& pressure_load(int i) { return pressures_[i]; }
+  const PressureLoad& pressure_load(int i) const { return pressures_[i]; }
+  int num_pressure_loads() const { return static_cast<int>(pressures_.size()); }
 
   // Replaces the surface springs; throws std::invalid_argument for a triangle out of range or
   // non-finite values.
@@ -112,6 +114,24 @@ class MechanicalModel {
 
   // Back to the rest rotations (identity guesses) and no springs.
   void reset();
+
+  // What a step leaves behind here: the element rotations with the polar iterations' warm
+  // starts, the membranes' frames, the last evaluation (its point, forces, energy) and the
+  // damping snapshot. The stepper saves it before a step and restores it when the step is rolled
+  // back; the vessels' beams are then evaluated again at the restored point with the restored
+  // rotations (the same bits: they keep no iteration state), their damping snapshot is the
+  // step's start's.
+  struct EvaluationState {
+    CorotationalTetra::RotationState tetra;
+    std::vector<Eigen::Matrix<double, 3, 2>> membrane_frames;
+    Eigen::VectorXd rotations_at, internal_at;
+    double tissue_energy_at = 0;
+    std::vector<Eigen::Matrix3d> damping_rotations;
+    std::vector<Eigen::Matrix<double, 3, 2>> damping_frames;
+  };
+  void save(EvaluationState& s) const;
+  void restore(const EvaluationState& s);
+  const CorotationalTetra& tetrahedra() const { return tetra_; }  // rotations and warm starts, for tests
 
   // Tracked points of the scene (probes), vessels.
   int num_probes() const { return static_cast<int>(probes_.size()); }

@@ -34,6 +34,7 @@ class MembraneCST {
   // earlier state, without assembling it.
   void tangent_product(int e, const Eigen::Matrix<double, 3, 2>& A, const Eigen::VectorXd& v, Vector9d& out) const;
   const std::vector<Eigen::Matrix<double, 3, 2>>& frames() const { return frame_; }
+  void restore_frames(const std::vector<Eigen::Matrix<double, 3, 2>>& frames) { frame_ = frames; }  // saved from frames()
 
   // Small-strain corotated in-plane strain, sym(R^T F) - I (2x2) of triangle e, for tests.
   Eigen::Matrix2d corotated_strain(int e, const Eigen::VectorXd& x) const;

@@ -1,8 +1,26 @@
 // The time stepper, ROS-free: static equilibrium and backward-Euler time steps by Newton's
 // method on the mechanical model (mechanical_model.h), with the update strategies (Newton-Krylov,
 // full and modified Newton, conjugate gradients), the predictors of dynamic steps, the line
-// search, the decisions to reuse or refresh the CHOLMOD factor, and the detectors that roll a
-// diverging step back. It owns the state (positions, velocities, time).
+// search, the decisions to reuse or refresh the CHOLMOD factor, the detectors that roll a
+// diverging step back, and the step's wall-time budget. It owns the state (positions,
+// velocities, time) and the snapshot that a rollback restores.
+//
+// Rollback: before each step the stepper saves everything the step may change, here, in the
+// mechanical model (rotations, their warm starts, the last evaluation, the damping snapshot) and
+// in the contact (instruments' poses, staging, grasps and reactions, the contacts with their
+// forces, the tubes' suction loads). A step that diverges, or throws (any exception, bad_alloc
+// included), restores it: the model is then the one before the step to the last bit, reactions
+// included. Only the CHOLMOD factor is not copied (its size is the factor's): a rolled-back step
+// that refactorised leaves it to be refactorised at the next step.
+//
+// Time budget (SolverOptions::time_budget): past it, a step stops before the next Newton
+// iteration or instrument stage, NotConverged ("time budget"), and keeps the iterate, judged as
+// the iteration cap judges it (a stall rolls back). Every iterate is a state Newton would go on
+// from: finite, below the blow-up bound, its contacts detected, accepted by the line search
+// (merit or potential fell); the next step continues the same solve. Going back to the last good
+// state instead would repeat the same frame for ever when one iteration (or one rising-merit
+// iteration of a real-time frame) does not fit in the budget. Out of time between stages, the
+// instruments stay at the last stage's pose and the next step stages on from there.
 //
 // It asks the contact (instrument_contact.h) for the contact forces, violation and constrained
 // update, and hands it its factor; it may not look inside the element sets or the contact rows.
@@ -10,6 +28,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
+#include <chrono>
 #include <limits>
 #include <string>
 
@@ -46,6 +65,7 @@ struct StepResult {
   int contacts = 0;           // instrument contacts carrying force at the end of the step
   int contact_sweeps = 0;     // Gauss-Seidel sweeps of the contact solves in this step
   double residual = 0;      // force residual relative to the load norm, at the end
+  bool out_of_time = false;  // the step stopped at SolverOptions::time_budget
   StepTiming timing;
   std::string message;      // why, when not converged
   bool converged() const { return status == Status::Converged; }
@@ -86,6 +106,25 @@ class NewtonStepper {
   // Back to the rest shape, zero velocity, time 0.
   void reset();
 
+  const Eigen::VectorXd& velocities() const { return v_; }  // 3 #V (m/s), dynamic mode
+
+  // The state before the last step, restored (the node's barrier uses it for a step whose result
+  // it cannot use). Valid right after a step; false, and nothing changed, when there is none (no
+  // step since construction, reset(), set_positions() or model_changed()).
+  bool undo_step();
+
+  // Test hook: a fault the next step meets on purpose, so that the tests, the stress matrix and
+  // the node's soak (~test_fault_every) exercise the rollback. Not for use in operation.
+  enum class InjectedFault {
+    None,
+    Exception,           // std::runtime_error after the step's first Newton update
+    OutOfMemory,         // std::bad_alloc there
+    NonFinite,           // a NaN in the first Newton update: the non-finite detector fires
+    NotPositiveDefinite  // the step's first CHOLMOD factorisation gets a negative pivot: the
+                         // definiteness detector fires (strategies that factorise with CHOLMOD)
+  };
+  void inject_fault(InjectedFault f) { fault_ = f; }
+
   // Force the supports exert on the tissue at the fixed DOFs (N; 0 elsewhere).
   Eigen::VectorXd support_forces();
   CholmodSolver& linear_solver() { return cholmod_; }
@@ -98,7 +137,8 @@ class NewtonStepper {
   // Line-search merit: the free residual norm and the contact violation, in newtons.
   double merit(double residual_norm, const Eigen::VectorXd& x) const;
   // Newton iterations from the current state; adds to result (iterations, timings, status).
-  // contacts_detected: the contacts are already those of the current state.
+  // contacts_detected: the contacts are already those of the current state. Past the time
+  // budget it stops.
   void newton(StepResult& result, bool contacts_detected);
   // Dynamic steps: the mechanical energy (kinetic + elastic) and the work of the loads and of
   // the constraints over the step that ended at x_ (J).
@@ -107,6 +147,26 @@ class NewtonStepper {
   // The Newton matrix into system_ with the element rotations of the last residual() call: the
   // solver always assembles where it last evaluated.
   void assemble_system();
+  // step() without the exception barrier.
+  StepResult advance();
+  // True once when the injected fault is f (it is then consumed).
+  bool take_fault(InjectedFault f);
+
+  struct Snapshot {
+    Eigen::VectorXd x, v, v_previous, x_start;
+    double time = 0, state_energy = 0;
+    bool rotations_continued = false, factor_valid = false;
+    long factorizations = 0;  // factorizations_ when taken
+    MechanicalModel::EvaluationState mechanics;
+    InstrumentContact::State contact;
+  };
+  void save(Snapshot& s);
+  void restore(const Snapshot& s);
+  Snapshot snapshot_;
+  bool snapshot_valid_ = false;
+  long factorizations_ = 0;  // CHOLMOD factorisations since construction
+  InjectedFault fault_ = InjectedFault::None;
+  std::chrono::steady_clock::time_point deadline_;  // of the step in progress (time_budget)
 
   MechanicalModel& mechanics_;
   InstrumentContact& contact_;

@@ -4,6 +4,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -17,17 +18,22 @@ enum class RotationMethod {
   Polar       // polar decomposition of F by SVD, inversion-safe (Irving, Teran, Fedkiw 2004)
 };
 
+// Limits: validate() refuses a value beyond its field's bounds (given beside each field, SI units)
+// with a message naming the field and the bound. The upper bounds keep the work and memory of a
+// step bounded (instrument sizes set the contact sampling, travel the stages, counts the loops)
+// or lie far beyond any tissue (moduli, thicknesses), where a value is a unit error.
+
 struct ParenchymaOptions {
-  double young_modulus = 3500.0;  // Pa
+  double young_modulus = 3500.0;  // Pa, in (0, 1e9]
   double poisson_ratio = 0.45;    // -, in (-1, 0.5)
-  double density = 1060.0;        // kg/m^3
+  double density = 1060.0;        // kg/m^3, in (0, 1e5]
   RotationMethod rotation = RotationMethod::Polar;
 };
 
 struct CapsuleOptions {
   bool enabled = false;
-  double young_modulus = 8.22e6;  // Pa
-  double thickness = 20e-6;       // m
+  double young_modulus = 8.22e6;  // Pa, in (0, 1e10]: Glisson's capsule is ~10 MPa, steel 2e11
+  double thickness = 20e-6;       // m, in (0, 1e-3]: Glisson's capsule is 20-100 um
   double poisson_ratio = 0.45;    // -, in (-1, 0.5)
   std::optional<Region> region;   // boundary triangles whose centroid lies inside; all if unset
 };
@@ -85,9 +91,9 @@ struct SolverOptions {
   Mode mode = Mode::Static;
   Strategy strategy = Strategy::NewtonKrylov;
   Predictor predictor = Predictor::ConstantVelocity;
-  double dt = 0.01;               // s, time step of the dynamic mode
-  int steps = 1;                  // static: load increments; dynamic: time steps
-  int max_iterations = 30;        // Newton iterations per step (cap)
+  double dt = 0.01;               // s, time step of the dynamic mode, in (0, 10]
+  int steps = 1;                  // static: load increments; dynamic: time steps; in [1, 1e6]
+  int max_iterations = 30;        // Newton iterations per step (cap), in [1, 10000]
   double tolerance = 1e-6;        // force residual, relative to the external load norm
   bool line_search = true;        // backtracking on the residual norm
   double rayleigh_mass = 0.0;     // 1/s, damping D = a M + b K
@@ -96,6 +102,10 @@ struct SolverOptions {
   // programs share; more gain only on idle, independent cores (doc/performance.md). Results do
   // not depend on it, to the last bit.
   int threads = 1;
+  // Wall time a step may take (s), in (0, inf]. Past it the step ends after the Newton iteration
+  // or instrument stage in progress, NotConverged, and the next step continues from its iterate
+  // (newton_stepper.h). The first iteration of a step always runs, so that frames progress.
+  double time_budget = std::numeric_limits<double>::infinity();
 };
 
 struct ProbeOptions {
@@ -124,28 +134,33 @@ struct InstrumentOptions {
   std::string name;
   Type type = Type::Probe;
   bool enabled = true;          // false: out of the scene (touches and holds nothing)
-  Eigen::Vector3d position = Eigen::Vector3d::Zero();             // m, tip
+  // m, tip; each coordinate within [-100, 100] (keyframes too): farther is a broken pose
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();
   Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();
+  // Sizes, in [1e-4, 0.05] m: the surface is sampled half a radius apart near an instrument, and
+  // a 10 cm wide instrument would press most of a liver.
   double radius = 0.003;        // m: probe sphere, shaft, grasper hold radius
-  double length = 0.05;         // m: shaft and tube
+  double length = 0.05;         // m: shaft and tube, in [1e-4, 0.5]
   double inner_radius = 0.005;  // m: tube lumen
-  double outer_radius = 0.0065; // m: tube wall outside
-  double suction = 0.0;         // Pa, tube: pressure below ambient in the lumen (>= 0)
+  double outer_radius = 0.0065; // m: tube wall outside, > inner_radius
+  double suction = 0.0;         // Pa, tube: pressure below ambient in the lumen, in [0, 101325] (vacuum)
   bool closed = false;          // grasper
-  std::vector<Keyframe> trajectory;  // empty: the pose stays where it is set
+  std::vector<Keyframe> trajectory;  // empty: the pose stays where it is set; at most 10000 keyframes
 };
+
+constexpr int kMaxInstruments = 16;  // instruments in one model (InstrumentContact::add_instrument)
 
 // The contact solver (projected Gauss-Seidel on the Delassus operator, contact.h).
 struct ContactOptions {
-  double friction = 0.0;            // -, Coulomb coefficient between instruments and tissue (>= 0)
-  double alarm_distance = 0.5e-3;   // m: surface nodes nearer than this to an instrument enter the contact problem
+  double friction = 0.0;            // -, Coulomb coefficient between instruments and tissue, in [0, 10]
+  double alarm_distance = 0.5e-3;   // m: surface nodes nearer than this to an instrument enter the contact problem, in [0, 0.01]
   double tolerance = 1e-7;          // m: largest penetration or stick slip accepted at convergence
-  int max_iterations = 1000;        // Gauss-Seidel sweeps per contact solve
+  int max_iterations = 1000;        // Gauss-Seidel sweeps per contact solve, in [1, 1e6]
 };
 
 // How far to trust the registered targets (target_uncertainty.h): what the model does not know.
 struct UncertaintyOptions {
-  double patch_spacing = 0.03;     // m, > 0: distance between the centres of the unknown force patches
+  double patch_spacing = 0.03;     // m, in [1e-3, 1]: distance between the centres of the unknown force patches
   double force_ratio = 1.0;        // -, >= 0: unknown force per patch over the springs' typical force per patch
   double stiffness_log_sd = 0.35;  // -, >= 0: standard deviation of the log of the tissue's stiffness factor
 };
@@ -159,13 +174,13 @@ struct RegistrationOptions {
   };
   double stiffness = 3e5;          // N/m: total of the springs, shared by the accepted points by weight
   Metric metric = Metric::PointToPlane;
-  double voxel_size = 5e-3;        // m: voxel-grid downsampling of the cloud (0: none)
-  int max_points = 4000;           // points kept after downsampling (evenly strided beyond it)
+  double voxel_size = 5e-3;        // m: voxel-grid downsampling of the cloud (0: none), in [0, 0.1]
+  int max_points = 4000;           // points kept after downsampling (evenly strided beyond it), in [1, 100000]
   double max_distance = 15e-3;     // m: points farther than this from the surface are outliers
   double trim_fraction = 0.1;      // -, in [0, 0.9): the farthest fraction of the rest is dropped too
   double huber_width = 2e-3;       // m: beyond this distance a point's weight falls as width/distance
-  int correspondence_updates = 3;  // closest points recomputed and solved this many times per cloud
-  int newton_iterations = 1;       // per update (a real-time frame: the next cloud continues)
+  int correspondence_updates = 3;  // closest points recomputed and solved this many times per cloud, in [1, 100]
+  int newton_iterations = 1;       // per update (a real-time frame: the next cloud continues), in [1, 100]
   SolverOptions::Strategy strategy = SolverOptions::Strategy::ModifiedNewton;  // of those iterations
   bool rigid_alignment = false;    // PCL ICP of the first cloud to the surface, applied to all clouds
   // What a cloud must show before it acts, and how hard it may pull (registration.h).

@@ -17,6 +17,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -73,10 +74,18 @@ class SurfaceLocator {
 };
 
 
+// Points an incoming cloud may hold before its preparation: a 5-megapixel structured-light
+// camera gives 5e6; the preparation copies the cloud twice, so ten million points cost about
+// 0.5 GB and several frames.
+constexpr uint64_t kMaxCloudPoints = 10000000;
+// "" when a cloud of `points` points is within kMaxCloudPoints, else the refusal naming the bound.
+std::string cloud_size_error(uint64_t points);
+
 // Cloud preparation, shared by register_cloud and the node's callback: points moved by
 // `transform` (into the model frame), the non-finite ones dropped, those outside `box` dropped,
 // then a voxel grid of `voxel` (m; 0: none; each voxel's points become their centroid) and an
-// even stride down to `max_points`. Returns the number of finite points received.
+// even stride down to `max_points`. Returns the number of finite points received. Throws
+// std::invalid_argument for a cloud beyond kMaxCloudPoints.
 int prepare_cloud(const pcl::PointCloud<pcl::PointXYZ>& in, const Eigen::Isometry3d& transform,
                   const Eigen::AlignedBox3d& box, double voxel, int max_points, pcl::PointCloud<pcl::PointXYZ>& out);
 

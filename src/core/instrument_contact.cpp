@@ -63,6 +63,9 @@ InstrumentContact::InstrumentContact(MechanicalModel& mechanics, const ContactOp
 int InstrumentContact::add_instrument(const InstrumentOptions& o, double time) {
   require_valid(validate(o));
   if (find_instrument(o.name) >= 0) throw std::invalid_argument("instruments." + o.name + ": the name is taken");
+  if (num_instruments() >= kMaxInstruments)
+    throw std::invalid_argument("instruments." + o.name + ": at most " + std::to_string(kMaxInstruments) +
+                                " instruments in a model");
   Instrument in;
   in.options = o;
   in.pose = in.pose_start = pose_at(o, time);
@@ -161,8 +164,29 @@ void InstrumentContact::sample_triangle(int t, double spacing, const Visit& visi
     }
 }
 
+void InstrumentContact::save(State& s) const {
+  s.instruments = instruments_;
+  s.contacts = contacts_;
+  s.suction.clear();
+  for (const Instrument& in : instruments_)
+    if (in.suction_load >= 0) s.suction.push_back(mechanics_.pressure_load(in.suction_load));
+  s.x_stage = x_stage_;
+  s.stage_from = stage_from_;
+  s.stage_to = stage_to_;
+}
+
+void InstrumentContact::restore(const State& s) {
+  instruments_ = s.instruments;
+  contacts_ = s.contacts;
+  size_t k = 0;
+  for (const Instrument& in : instruments_)
+    if (in.suction_load >= 0) mechanics_.pressure_load(in.suction_load) = s.suction[k++];
+  x_stage_ = s.x_stage;
+  stage_from_ = s.stage_from;
+  stage_to_ = s.stage_to;
+}
+
 int InstrumentContact::begin_step(double t, const Eigen::VectorXd& x) {
-  contacts_start_ = contacts_;
   const Eigen::MatrixX3i& boundary = mechanics_.boundary();
   int stages = 1;
   for (int k = 0; k < num_instruments(); ++k) {
@@ -185,8 +209,10 @@ int InstrumentContact::begin_step(double t, const Eigen::VectorXd& x) {
           in.pose_start.translation() += depth * in.pose.linear().col(2);
         }
       }
+      // In floating point until capped: the travel may be any finite length (the cast of a
+      // value beyond int's range is undefined).
       const double travel = (in.pose.translation() - in.pose_start.translation()).norm();
-      stages = std::max(stages, std::min(kMaxStages, static_cast<int>(std::ceil(travel / (0.25 * size(o))))));
+      stages = std::max(stages, static_cast<int>(std::min<double>(kMaxStages, std::ceil(travel / (0.25 * size(o))))));
     }
     in.was_enabled = o.enabled;
     if (o.type == InstrumentOptions::Type::Grasper) {
@@ -586,11 +612,7 @@ void InstrumentContact::add_force_change(Eigen::VectorXd& f) const {
   }
 }
 
-void InstrumentContact::end_step(bool rolled_back, const Eigen::VectorXd& x) {
-  if (rolled_back) {  // the contacts and forces of the step's start
-    contacts_ = contacts_start_;
-    for (Contact& c : contacts_) c.rows = contact_rows(c, x, &c.frame);
-  }
+void InstrumentContact::end_step(const Eigen::VectorXd& x) {
   for (Instrument& in : instruments_) in.reaction = InstrumentReaction{};
   for (const Contact& c : contacts_) {
     if (c.lambda.isZero(0.0)) continue;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace liver_sim {
 
@@ -38,6 +39,55 @@ void LiverModel::reset() {
   mechanics_.reset();
   contact_.reset();
   stepper_.reset();
+}
+
+bool same_bits(const std::vector<double>& a, const std::vector<double>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(double)) == 0);
+}
+
+std::vector<double> LiverModel::observable_state() const {
+  std::vector<double> s;
+  const auto add = [&s](const auto& values) {
+    for (Eigen::Index i = 0; i < values.size(); ++i) s.push_back(values.data()[i]);
+  };
+  add(stepper_.positions());
+  add(stepper_.velocities());
+  add(stepper_.step_start());
+  s.push_back(stepper_.time());
+  for (int i = 0; i < contact_.num_instruments(); ++i) {
+    add(contact_.pose(i).matrix());
+    add(contact_.reaction(i).force);
+    add(contact_.reaction(i).torque);
+    s.push_back(contact_.reaction(i).contacts);
+  }
+  for (const InstrumentContact::Contact& c : contact_.contacts()) {
+    s.push_back(c.instrument);
+    s.push_back(c.held);
+    for (int j = 0; j < 3; ++j) s.push_back(c.point.nodes[j]);
+    add(c.point.weights);
+    s.push_back(c.point.sample);
+    add(c.frame);
+    add(c.rows);
+    add(c.lambda);
+  }
+  for (int i = 0; i < mechanics_.num_pressure_loads(); ++i) {
+    const PressureLoad& p = mechanics_.pressure_load(i);
+    s.push_back(p.pressure);
+    s.insert(s.end(), p.triangles.begin(), p.triangles.end());
+  }
+  const CorotationalTetra& tetra = mechanics_.tetrahedra();
+  for (int e = 0; e < tetra.size(); ++e) {
+    add(tetra.rotation(e));
+    add(tetra.rotation_guess(e).coeffs());
+  }
+  return s;
+}
+
+bool LiverModel::finite_state() const {
+  bool finite = positions().allFinite() && stepper_.velocities().allFinite();
+  for (int i = 0; i < num_instruments(); ++i)
+    finite &= instrument_reaction(i).force.allFinite() && instrument_reaction(i).torque.allFinite();
+  return finite;
 }
 
 double LiverModel::max_displacement() const {

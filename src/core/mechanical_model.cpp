@@ -230,6 +230,27 @@ void MechanicalModel::reset() {
   surface_targets_.clear();
 }
 
+void MechanicalModel::save(EvaluationState& s) const {
+  tetra_.save_rotations(s.tetra);
+  s.membrane_frames = membrane_.frames();
+  s.rotations_at = rotations_at_;
+  s.internal_at = internal_at_;
+  s.tissue_energy_at = tissue_energy_at_;
+  s.damping_rotations = damping_.tet_rotation;
+  s.damping_frames = damping_.membrane_frame;
+}
+
+void MechanicalModel::restore(const EvaluationState& s) {
+  tetra_.restore_rotations(s.tetra);
+  membrane_.restore_frames(s.membrane_frames);
+  rotations_at_ = s.rotations_at;
+  internal_at_ = s.internal_at;
+  tissue_energy_at_ = s.tissue_energy_at;
+  damping_.tet_rotation = s.damping_rotations;
+  damping_.membrane_frame = s.damping_frames;
+  if (!vessels_.empty() && rotations_at_.size() > 0) vessels_.add_forces(rotations_at_, energy_work_);
+}
+
 template <typename TetBlock, typename Triangle>
 double MechanicalModel::element_pass(Eigen::Index size, Eigen::VectorXd& f, const TetBlock& tet_block,
                                      const Triangle& triangle) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <new>
 #include <sstream>
 #include <stdexcept>
 
@@ -15,6 +16,13 @@ constexpr int kRefactorAfter = 10;  // GMRES iterations beyond which the factor 
 constexpr int kStallIterations = 5; // a capped step this long that ends no lower than it began has stalled
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+std::string stalled(double merit, double start_merit, int iterations) {
+  std::ostringstream m;
+  m << "stalled: residual " << merit << " N after " << iterations << " iterations, no lower than the " << start_merit
+    << " N it started from";
+  return m.str();
 }
 
 const SolverOptions& validated(const SolverOptions& o) {
@@ -66,14 +74,17 @@ std::string NewtonStepper::set_options(const SolverOptions& solver) {
 void NewtonStepper::set_positions(const Eigen::VectorXd& x) {
   x_ = x;
   state_energy_ = std::numeric_limits<double>::quiet_NaN();
+  snapshot_valid_ = false;
 }
 
 void NewtonStepper::model_changed(bool refactorize) {
   state_energy_ = std::numeric_limits<double>::quiet_NaN();
   if (refactorize) factor_valid_ = false;
+  snapshot_valid_ = false;  // its evaluation is of the model before the change
 }
 
 void NewtonStepper::reset() {
+  snapshot_valid_ = false;
   factor_valid_ = false;
   state_energy_ = std::numeric_limits<double>::quiet_NaN();
   x_ = mechanics_.rest_positions();
@@ -146,10 +157,67 @@ void NewtonStepper::assemble_system() {
   mechanics_.assemble(k_scale, m_scale, system_);
 }
 
+void NewtonStepper::save(Snapshot& s) {
+  s.x = x_;
+  s.v = v_;
+  s.v_previous = v_previous_;
+  s.x_start = x_start_;
+  s.time = time_;
+  s.state_energy = state_energy_;
+  s.rotations_continued = rotations_continued_;
+  s.factor_valid = factor_valid_;
+  s.factorizations = factorizations_;
+  mechanics_.save(s.mechanics);
+  contact_.save(s.contact);
+}
+
+void NewtonStepper::restore(const Snapshot& s) {
+  x_ = s.x;
+  v_ = s.v;
+  v_previous_ = s.v_previous;
+  x_start_ = s.x_start;
+  time_ = s.time;
+  state_energy_ = s.state_energy;
+  rotations_continued_ = s.rotations_continued;
+  // The factor is the one from before the step unless the step replaced it.
+  factor_valid_ = s.factor_valid && factorizations_ == s.factorizations;
+  mechanics_.restore(s.mechanics);
+  contact_.restore(s.contact);
+}
+
+bool NewtonStepper::undo_step() {
+  if (!snapshot_valid_) return false;
+  restore(snapshot_);
+  snapshot_valid_ = false;
+  return true;
+}
+
+bool NewtonStepper::take_fault(InjectedFault f) {
+  if (fault_ != f) return false;
+  fault_ = InjectedFault::None;
+  return true;
+}
+
 StepResult NewtonStepper::step() {
+  snapshot_valid_ = false;
+  save(snapshot_);
+  snapshot_valid_ = true;
+  try {
+    return advance();
+  } catch (...) {  // whatever it was, the model stays the one before the step
+    restore(snapshot_);
+    throw;
+  }
+}
+
+StepResult NewtonStepper::advance() {
   const auto t_step = Clock::now();
+  // Beyond 1e6 s the budget is no limit in practice, and the clock's range holds it.
+  deadline_ = t_step + std::chrono::duration_cast<Clock::duration>(
+                           std::chrono::duration<double>(std::min(solver_.time_budget, 1e6)));
   StepResult result;
-  x_start_ = x_;  // the last good state, restored if the step diverges
+  x_start_ = x_;
+  if (fault_ == InjectedFault::NotPositiveDefinite) factor_valid_ = false;  // a factorisation for the fault to meet
   const bool dynamic = solver_.mode == SolverOptions::Mode::Dynamic;
   if (dynamic && solver_.rayleigh_stiffness > 0) {
     // Rayleigh damping b K v with the stiffness of the state the step starts from, fixed within
@@ -161,7 +229,14 @@ StepResult NewtonStepper::step() {
   }
   const int stages = contact_.begin_step(time_ + solver_.dt, x_);
   bool rotations_predicted = false;
-  for (int k = 1; k <= stages && result.status != StepResult::Status::Diverged; ++k) {
+  for (int k = 1; k <= stages && result.status != StepResult::Status::Diverged && !result.out_of_time; ++k) {
+    if (k > 1 && Clock::now() > deadline_) {
+      // Out of time between stages: the state and the instruments are the last stage's end.
+      result.status = StepResult::Status::NotConverged;
+      result.message = "time budget";
+      result.out_of_time = true;
+      break;
+    }
     contact_.begin_stage(k, stages, x_);
     // Dynamic: Newton starts from the predicted state (solver.predictor), whose error is
     // O(dt^2) or O(dt^3), not O(dt): one iteration of modified Newton then lands 100x closer to
@@ -206,23 +281,21 @@ StepResult NewtonStepper::step() {
         << work << " J";
       result.status = StepResult::Status::Diverged;
       result.message = m.str();
-      state_energy_ = energy_before;
     }
   } else {
     state_energy_ = std::numeric_limits<double>::quiet_NaN();
   }
-  const bool rolled_back = result.status == StepResult::Status::Diverged;
-  rotations_continued_ = rotations_predicted && !rolled_back;
-  if (rolled_back) {
-    x_ = x_start_;
+  if (result.status == StepResult::Status::Diverged) {
+    restore(snapshot_);
   } else {
+    rotations_continued_ = rotations_predicted;
     if (dynamic) {
       v_previous_.swap(v_);
       v_ = (x_ - x_start_) / solver_.dt;
     }
     time_ += solver_.dt;
+    contact_.end_step(x_);
   }
-  contact_.end_step(rolled_back, x_);
   result.contacts = contact_.loaded_contacts();
   result.timing.total_ms = ms_since(t_step);
   return result;
@@ -280,12 +353,21 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
       // may rise while the next frames continue from it; a runaway is still caught by the
       // blow-up, energy and finiteness checks.
       if (current_merit >= start_merit && solver_.max_iterations >= kStallIterations) {
-        std::ostringstream m;
-        m << "stalled: residual " << current_merit << " N after " << solver_.max_iterations
-          << " iterations, no lower than the " << start_merit << " N it started from";
-        fail(m.str());
+        fail(stalled(current_merit, start_merit, solver_.max_iterations));
       } else {
         result.message = "iteration cap";  // within the string's inline buffer: no allocation per frame
+      }
+      break;
+    }
+    // Out of time: the iterate is kept, judged as at the cap (a stall needs kStallIterations
+    // iterations to judge). The first iteration of a step always runs, so that every frame moves on.
+    if (result.iterations > 0 && Clock::now() > deadline_) {
+      const int done = result.iterations - iterations_before;
+      if (current_merit >= start_merit && done >= kStallIterations && solver_.max_iterations >= kStallIterations) {
+        fail(stalled(current_merit, start_merit, done));
+      } else {
+        result.out_of_time = true;
+        result.message = "time budget";
       }
       break;
     }
@@ -324,7 +406,14 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     const bool fresh_factor = uses_factor && !factor_valid_;
     if (fresh_factor) {
       t0 = Clock::now();
+      if (take_fault(InjectedFault::NotPositiveDefinite))
+        for (int i = 0; i < pattern.rows(); ++i)
+          if (!fixed[i]) {
+            system_[pattern.diagonal(i)] = -1;
+            break;
+          }
       const bool factored = cholmod_.factorize(system_);
+      ++factorizations_;
       result.timing.factorization_ms += ms_since(t0);
       ++result.factorizations;
       if (!factored) {
@@ -387,6 +476,7 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     }
     result.linear_iterations += krylov;
     result.timing.solve_ms += ms_since(t0);
+    if (take_fault(InjectedFault::NonFinite)) dx_[0] = std::numeric_limits<double>::quiet_NaN();
     if (!dx_.allFinite()) {
       fail("non-finite Newton update");
       break;
@@ -401,7 +491,9 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     double slope0 = 0;
     for (int i = 0; i < r_.size(); ++i)
       if (!fixed[i]) slope0 += r_[i] * dx_[i];
-    double alpha = 1.0, best_alpha = 1.0, best_norm = 0, best_merit = std::numeric_limits<double>::infinity();
+    // best_norm starts as NaN: a search whose every trial is non-finite ends at the detector.
+    double alpha = 1.0, best_alpha = 1.0, best_norm = std::numeric_limits<double>::quiet_NaN(),
+           best_merit = std::numeric_limits<double>::infinity();
     double ref_try = reference;
     const int max_halvings = solver_.line_search ? 6 : 0;
     bool accepted = false;  // a trial passed the merit or the potential test
@@ -450,6 +542,8 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     }
     x_.swap(x_try_);
     r_.swap(r_try_);
+    if (take_fault(InjectedFault::Exception)) throw std::runtime_error("injected fault (test hook)");
+    if (take_fault(InjectedFault::OutOfMemory)) throw std::bad_alloc();
     // Modified Newton keeps its factor while it contracts the residual well: with contacts, the
     // residual it was asked to zero, which carries the update's change of the contact forces
     // (a step that closes new gaps raises the residual it started from).

@@ -22,6 +22,17 @@ std::string non_negative(const std::string& field, double v) {
   return (std::isfinite(v) && v >= 0) ? "" : message(field, "finite and >= 0", v);
 }
 
+// In (0, max] (open below) or [min, max].
+std::string positive_up_to(const std::string& field, double v, double max, const char* rule) {
+  return (std::isfinite(v) && v > 0 && v <= max) ? "" : message(field, rule, v);
+}
+std::string within(const std::string& field, double v, double min, double max, const char* rule) {
+  return (std::isfinite(v) && v >= min && v <= max) ? "" : message(field, rule, v);
+}
+std::string count_within(const std::string& field, long v, long min, long max, const char* rule) {
+  return v >= min && v <= max ? "" : message(field, rule, static_cast<double>(v));
+}
+
 std::string poisson(const std::string& field, double v) {
   return (std::isfinite(v) && v > -1 && v < 0.5) ? "" : message(field, "in (-1, 0.5)", v);
 }
@@ -35,9 +46,9 @@ std::string first_error(std::initializer_list<std::string> errors) {
 }  // namespace
 
 std::string validate(const ParenchymaOptions& o) {
-  return first_error({positive("parenchyma.young_modulus", o.young_modulus),
+  return first_error({positive_up_to("parenchyma.young_modulus", o.young_modulus, 1e9, "in (0, 1e9] Pa"),
                       poisson("parenchyma.poisson_ratio", o.poisson_ratio),
-                      positive("parenchyma.density", o.density)});
+                      positive_up_to("parenchyma.density", o.density, 1e5, "in (0, 1e5] kg/m^3")});
 }
 
 std::string validate(const CapsuleOptions& o) {
@@ -46,8 +57,8 @@ std::string validate(const CapsuleOptions& o) {
     region = validate(*o.region);
     if (!region.empty()) region = "capsule.region: " + region;
   }
-  return first_error({positive("capsule.young_modulus", o.young_modulus),
-                      positive("capsule.thickness", o.thickness),
+  return first_error({positive_up_to("capsule.young_modulus", o.young_modulus, 1e10, "in (0, 1e10] Pa"),
+                      positive_up_to("capsule.thickness", o.thickness, 1e-3, "in (0, 1e-3] m"),
                       poisson("capsule.poisson_ratio", o.poisson_ratio), region});
 }
 
@@ -72,16 +83,17 @@ std::optional<SolverOptions::Strategy> parse_strategy(const std::string& word) {
 }
 
 std::string validate(const SolverOptions& o) {
-  return first_error({positive("solver.dt", o.dt),
-                      o.steps >= 1 ? "" : message("solver.steps", ">= 1", o.steps),
-                      o.max_iterations >= 1 ? "" : message("solver.max_iterations", ">= 1", o.max_iterations),
+  return first_error({positive_up_to("solver.dt", o.dt, 10, "in (0, 10] s"),
+                      count_within("solver.steps", o.steps, 1, 1000000, "in [1, 1e6]"),
+                      count_within("solver.max_iterations", o.max_iterations, 1, 10000, "in [1, 10000]"),
                       positive("solver.tolerance", o.tolerance),
                       non_negative("solver.rayleigh_mass", o.rayleigh_mass),
                       non_negative("solver.rayleigh_stiffness", o.rayleigh_stiffness),
                       o.threads >= 1 && o.threads <= WorkerPool::kMaxThreads
                           ? ""
                           : message("solver.threads", ("in [1, " + std::to_string(WorkerPool::kMaxThreads) + "]").c_str(),
-                                    o.threads)});
+                                    o.threads),
+                      o.time_budget > 0 ? "" : message("solver.time_budget", "in (0, inf] s", o.time_budget)});
 }
 
 std::string validate(const VesselOptions& o) {
@@ -94,42 +106,44 @@ std::string validate(const VesselOptions& o) {
 std::string validate(const InstrumentOptions& o) {
   const std::string k = "instruments." + o.name + ".";
   using Type = InstrumentOptions::Type;
+  constexpr double kReach = 100;  // m: largest coordinate of a position
   auto pose_ok = [](const Eigen::Vector3d& p, const Eigen::Quaterniond& q) {
-    return p.allFinite() && q.coeffs().allFinite() && q.norm() > 1e-6;
+    return p.allFinite() && p.cwiseAbs().maxCoeff() <= kReach && q.coeffs().allFinite() && q.norm() > 1e-6;
   };
+  const char* kPoseRule = "position and orientation must be finite, each coordinate within [-100, 100] m, the quaternion non-zero";
+  auto size = [&](const char* field, double v) { return within(k + field, v, 1e-4, 0.05, "in [1e-4, 0.05] m"); };
+  auto length = [&] { return within(k + "length", o.length, 1e-4, 0.5, "in [1e-4, 0.5] m"); };
   std::string shape;
   switch (o.type) {
-    case Type::Probe: shape = positive(k + "radius", o.radius); break;
-    case Type::Grasper: shape = positive(k + "radius", o.radius); break;
-    case Type::Shaft: shape = first_error({positive(k + "radius", o.radius), positive(k + "length", o.length)}); break;
+    case Type::Probe: shape = size("radius", o.radius); break;
+    case Type::Grasper: shape = size("radius", o.radius); break;
+    case Type::Shaft: shape = first_error({size("radius", o.radius), length()}); break;
     case Type::Tube:
-      shape = first_error({positive(k + "inner_radius", o.inner_radius),
-                           o.outer_radius > o.inner_radius && std::isfinite(o.outer_radius)
-                               ? ""
-                               : message(k + "outer_radius", "finite and > inner_radius", o.outer_radius),
-                           positive(k + "length", o.length), non_negative(k + "suction", o.suction)});
+      shape = first_error({size("inner_radius", o.inner_radius), size("outer_radius", o.outer_radius),
+                           o.outer_radius > o.inner_radius ? "" : message(k + "outer_radius", "> inner_radius", o.outer_radius),
+                           length(), within(k + "suction", o.suction, 0, 101325, "in [0, 101325] Pa (vacuum)")});
       break;
   }
-  std::string path;
+  std::string path = count_within(k + "trajectory", static_cast<long>(o.trajectory.size()), 0, 10000,
+                                  "at most 10000 keyframes long");
   for (size_t i = 0; i < o.trajectory.size() && path.empty(); ++i) {
     const InstrumentOptions::Keyframe& f = o.trajectory[i];
     const std::string ki = k + "trajectory." + std::to_string(i);
     if (!std::isfinite(f.t) || (i > 0 && !(f.t > o.trajectory[i - 1].t)))
       path = ki + ".t must be finite and increase along the trajectory";
     else if (!pose_ok(f.position, f.orientation))
-      path = ki + ": position and orientation must be finite, the quaternion non-zero";
+      path = ki + ": " + kPoseRule;
   }
   return first_error({o.name.empty() ? "instruments: a name is required" : "", shape,
-                      pose_ok(o.position, o.orientation) ? ""
-                                                         : k + "pose: position and orientation must be finite, the quaternion non-zero",
+                      pose_ok(o.position, o.orientation) ? "" : k + "pose: " + kPoseRule,
                       path});
 }
 
 std::string validate(const ContactOptions& o) {
-  return first_error({non_negative("contact.friction", o.friction),
-                      non_negative("contact.alarm_distance", o.alarm_distance),
+  return first_error({within("contact.friction", o.friction, 0, 10, "in [0, 10]"),
+                      within("contact.alarm_distance", o.alarm_distance, 0, 0.01, "in [0, 0.01] m"),
                       positive("contact.tolerance", o.tolerance),
-                      o.max_iterations >= 1 ? "" : message("contact.max_iterations", ">= 1", o.max_iterations)});
+                      count_within("contact.max_iterations", o.max_iterations, 1, 1000000, "in [1, 1e6]")});
 }
 
 static std::string candidate_error(const std::vector<Region>& regions) {
@@ -142,21 +156,22 @@ static std::string candidate_error(const std::vector<Region>& regions) {
 
 std::string validate(const RegistrationOptions& o) {
   return first_error(
-      {positive("registration.stiffness", o.stiffness), non_negative("registration.voxel_size", o.voxel_size),
-       o.max_points >= 1 ? "" : message("registration.max_points", ">= 1", o.max_points),
+      {positive("registration.stiffness", o.stiffness),
+       within("registration.voxel_size", o.voxel_size, 0, 0.1, "in [0, 0.1] m"),
+       count_within("registration.max_points", o.max_points, 1, 100000, "in [1, 100000]"),
        positive("registration.max_distance", o.max_distance),
        std::isfinite(o.trim_fraction) && o.trim_fraction >= 0 && o.trim_fraction < 0.9
            ? ""
            : message("registration.trim_fraction", "in [0, 0.9)", o.trim_fraction),
        positive("registration.huber_width", o.huber_width),
-       o.correspondence_updates >= 1 ? "" : message("registration.correspondence_updates", ">= 1", o.correspondence_updates),
-       o.newton_iterations >= 1 ? "" : message("registration.newton_iterations", ">= 1", o.newton_iterations),
+       count_within("registration.correspondence_updates", o.correspondence_updates, 1, 100, "in [1, 100]"),
+       count_within("registration.newton_iterations", o.newton_iterations, 1, 100, "in [1, 100]"),
        o.min_points >= 1 ? "" : message("registration.min_points", ">= 1", o.min_points),
        o.min_coverage >= 0 && o.min_coverage <= 1 ? "" : message("registration.min_coverage", "in [0, 1]", o.min_coverage),
        o.full_coverage > 0 && o.full_coverage <= 1 ? "" : message("registration.full_coverage", "in (0, 1]", o.full_coverage),
        candidate_error(o.candidate_supports), positive("registration.support_stiffness", o.support_stiffness),
        o.support_gain > 0 && o.support_gain < 1 ? "" : message("registration.support_gain", "in (0, 1)", o.support_gain),
-       positive("registration.uncertainty.patch_spacing", o.uncertainty.patch_spacing),
+       within("registration.uncertainty.patch_spacing", o.uncertainty.patch_spacing, 1e-3, 1, "in [1e-3, 1] m"),
        non_negative("registration.uncertainty.force_ratio", o.uncertainty.force_ratio),
        non_negative("registration.uncertainty.stiffness_log_sd", o.uncertainty.stiffness_log_sd)});
 }

@@ -214,8 +214,15 @@ void SurfaceRegistration::clear() {
   points_->clear();
 }
 
+std::string cloud_size_error(uint64_t points) {
+  if (points <= kMaxCloudPoints) return "";
+  return "a cloud of " + std::to_string(points) + " points: at most " + std::to_string(kMaxCloudPoints) + " are taken";
+}
+
 int prepare_cloud(const pcl::PointCloud<pcl::PointXYZ>& in, const Eigen::Isometry3d& transform,
                   const Eigen::AlignedBox3d& box, double voxel, int max_points, pcl::PointCloud<pcl::PointXYZ>& out) {
+  const std::string too_large = cloud_size_error(in.size());
+  if (!too_large.empty()) throw std::invalid_argument(too_large);
   auto cropped = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
   cropped->reserve(in.size());
   int finite_points = 0;
@@ -454,6 +461,13 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
   frame_solver.strategy = options_.strategy;
   frame_solver.max_iterations = options_.newton_iterations;
   model_.set_solver_options(frame_solver);  // valid: the scene's with validated values
+  // The scene's options again however the solve ends (a step may throw: the model is rolled
+  // back and the exception goes on to the caller).
+  struct SceneOptions {
+    LiverModel& model;
+    const SolverOptions& options;
+    ~SceneOptions() { model.set_solver_options(options); }
+  } scene_options{model_, scene_solver};
   frame.step = model_.step();
   // An iteration on a factor from before the springs moved may not descend, and the step is
   // rolled back (stalled). Once more, on a fresh factor.
@@ -463,7 +477,6 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
     model_.refactorize();
     frame.step = model_.step();
   }
-  model_.set_solver_options(scene_solver);
   frame.solve_ms += ms_since(t0);
   frame.newton_iterations += frame.step.iterations;
   frame.factorizations += frame.step.factorizations;

@@ -33,6 +33,7 @@
 #include "liver_sim/TargetCovariances.h"
 #include "liver_sim/liver_model.h"
 #include "liver_sim/registration.h"
+#include "liver_sim/step_guard.h"
 #include "liver_sim/target_uncertainty.h"
 #include "liver_sim/worker_pool.h"
 #include "mesh_marker.h"
@@ -76,12 +77,24 @@ class LiverSimNode {
     if (!(rate_ >= 1 && rate_ <= 1000) || !(publish_rate_ >= 0.1 && publish_rate_ <= 100))
       throw std::invalid_argument("~rate must be in [1, 1000] Hz, ~publish_rate in [0.1, 100] Hz");
     if (!(color_scale_max_ > 0)) throw std::invalid_argument("~color_scale_max must be > 0");
+    // A step stops at its time budget (SolverOptions::time_budget), one frame by default, so that
+    // the loop keeps its rate whatever the solver does.
+    double step_time_budget = 1.0 / rate_;
+    pnh.param("step_time_budget", step_time_budget, step_time_budget);
+    if (!(step_time_budget > 0)) throw std::invalid_argument("~step_time_budget must be > 0 s");
+    int test_fault_every = 0;
+    pnh.param("test_fault_every", test_fault_every, 0);
+    if (test_fault_every < 0) throw std::invalid_argument("~test_fault_every must be >= 0");
+    guard_.set_test_fault_every(test_fault_every);
     if (!(surface_alpha_ >= 0 && surface_alpha_ <= 1)) throw std::invalid_argument("~surface_alpha must be in [0, 1]");
     // ~parenchyma/*, ~capsule/*, ~solver/*, ~contact/*, ~registration/* override the scalars of the
     // scene file; ~threads is solver.threads. The node steps in real-time frames by default: modified Newton on a reused
     // factor (contacts carried in the same solve), two iterations a frame, a step that has not
     // converged continuing in the next frame; ~solver/strategy and ~solver/max_iterations change that.
-    std::vector<std::string> overrides = {"solver.strategy=modified_newton", "solver.max_iterations=2"};
+    std::ostringstream budget;
+    budget.precision(17);
+    budget << "solver.time_budget=" << step_time_budget;
+    std::vector<std::string> overrides = {"solver.strategy=modified_newton", "solver.max_iterations=2", budget.str()};
     for (const char* section : {"parenchyma", "capsule", "solver", "contact", "registration"}) {
       XmlRpc::XmlRpcValue values;
       if (!pnh.getParam(section, values)) continue;
@@ -193,53 +206,99 @@ class LiverSimNode {
     ros::WallTime next_publish = ros::WallTime::now();
     bool must_step = true;  // the first step brings the scene's loads to equilibrium
     while (ros::ok()) {
-      must_step |= apply_inputs(loop);
-      std::optional<RegistrationFrame> registered = register_pending_cloud();
-      if (registered) registering_ = true;
-      analyse_registration(registered.has_value());
-      if (registered || must_step) {
-        // While clouds come, the model converges on the last one in the registration's short
-        // steps, so that the next cloud waits for one iteration, not a full solve.
-        StepResult r;
-        if (registered) {
-          r = registered->step;
-        } else if (registering_) {
-          const RegistrationFrame f = registration_->refine();
-          registration_rms_ = f.rms;
-          r = f.step;
-        } else {
-          r = model_->step();
+      // The last line of the barrier: a fault the frame's own guards did not catch (publishing,
+      // diagnostics) is counted, and the loop goes on.
+      try {
+        must_step |= guarded_inputs(loop);
+        must_step = simulate_frame(must_step);
+        const ros::WallTime now = ros::WallTime::now();
+        if (now >= next_publish) {
+          const ros::WallDuration publish_period(1.0 / publish_rate_);
+          publish_mesh();
+          if (!must_step) publish_status(last_);
+          next_publish += publish_period;
+          if (next_publish < now) next_publish = now + publish_period;  // fell behind: no burst
         }
-        if (r.status != StepResult::Status::NotConverged) registering_ = false;
-        ++steps_;
-        step_times_.push_back(ros::WallTime::now());
-        last_ = r;
-        // Continue next frame while iterating; a diverged step waits for new input.
-        must_step = r.status == StepResult::Status::NotConverged ||
-                    (r.converged() && r.iterations > 0);
-        state_ = r.status == StepResult::Status::Diverged ? "diverged"
-                 : r.converged()                            ? "converged"
-                                                            : "iterating";
-        if (r.status == StepResult::Status::Diverged)
-          ROS_WARN_THROTTLE(1.0, "liver_sim: step diverged (%s); kept the last good state", r.message.c_str());
-        publish_status(r);
-      } else {
-        state_ = state_ == "diverged" ? state_ : "idle";
+        updater_.update();
+      } catch (const std::exception& e) {
+        fault(std::string("in the loop: ") + e.what());
+      } catch (...) {
+        fault("in the loop: exception of unknown type");
       }
-      const ros::WallTime now = ros::WallTime::now();
-      if (now >= next_publish) {
-        const ros::WallDuration publish_period(1.0 / publish_rate_);
-        publish_mesh();
-        if (!must_step) publish_status(last_);
-        next_publish += publish_period;
-        if (next_publish < now) next_publish = now + publish_period;  // fell behind: no burst
-      }
-      updater_.update();
       loop.sleep();
     }
   }
 
  private:
+  // apply_inputs behind the barrier: a value beyond its bounds (std::invalid_argument) is a
+  // refused input, anything else a fault; the model stays as it was.
+  bool guarded_inputs(ros::WallRate& loop) {
+    try {
+      return apply_inputs(loop);
+    } catch (const std::invalid_argument& e) {
+      reject(e.what());
+    } catch (const std::exception& e) {
+      fault(std::string("applying the inputs: ") + e.what());
+    } catch (...) {
+      fault("applying the inputs: exception of unknown type");
+    }
+    return true;
+  }
+
+  void fault(const std::string& text) {  // simulation thread
+    guard_.count(text);
+    state_ = "fault";
+    ROS_ERROR_THROTTLE(1.0, "liver_sim: fault %s; the model keeps its last good state", text.c_str());
+  }
+
+  // One frame's simulation: the latest cloud registered, the registration's analysis, a step,
+  // all behind the barrier (step_guard.h). Returns whether the next frame must step.
+  bool simulate_frame(bool must_step) {
+    bool stepped = false;
+    const StepResult r = guard_.step(*model_, [&] {
+      std::optional<RegistrationFrame> registered = register_pending_cloud();
+      if (registered) registering_ = true;
+      analyse_registration(registered.has_value());
+      stepped = registered || must_step;
+      // While clouds come, the model converges on the last one in the registration's short
+      // steps, so that the next cloud waits for one iteration, not a full solve.
+      if (registered) return registered->step;
+      if (!stepped) return StepResult();
+      if (registering_) {
+        const RegistrationFrame f = registration_->refine();
+        registration_rms_ = f.rms;
+        return f.step;
+      }
+      return model_->step();
+    });
+    if (guard_.last_step_faulted()) {
+      // Retried at the next frame: the fault may have been passing (memory, an injected one).
+      ++steps_;
+      step_times_.push_back(ros::WallTime::now());
+      last_ = r;
+      state_ = "fault";
+      ROS_ERROR_THROTTLE(1.0, "liver_sim: %s; the model keeps its last good state", r.message.c_str());
+      publish_status(r);
+      return true;
+    }
+    if (!stepped) {
+      if (state_ != "diverged" && state_ != "fault") state_ = "idle";
+      return false;
+    }
+    if (r.status != StepResult::Status::NotConverged) registering_ = false;
+    ++steps_;
+    step_times_.push_back(ros::WallTime::now());
+    last_ = r;
+    state_ = r.status == StepResult::Status::Diverged ? "diverged"
+             : r.converged()                            ? "converged"
+                                                        : "iterating";
+    if (r.status == StepResult::Status::Diverged)
+      ROS_WARN_THROTTLE(1.0, "liver_sim: step diverged (%s); kept the last good state", r.message.c_str());
+    publish_status(r);
+    // Continue next frame while iterating; a diverged step waits for new input.
+    return r.status == StepResult::Status::NotConverged || (r.converged() && r.iterations > 0);
+  }
+
   // Moves pending inputs into the model; true when something changed. The node's lock is not
   // held while the instruments apply theirs (they report refusals through reject()).
   bool apply_inputs(ros::WallRate& loop) {
@@ -356,6 +415,8 @@ class LiverSimNode {
   // the layout fields, so they are checked first).
   static std::string cloud_layout_error(const sensor_msgs::PointCloud2& c) {
     if (static_cast<uint64_t>(c.width) * c.height == 0) return "empty cloud";
+    const std::string too_large = cloud_size_error(static_cast<uint64_t>(c.width) * c.height);
+    if (!too_large.empty()) return too_large;
     if (static_cast<uint64_t>(c.point_step) * c.width > c.row_step ||
         static_cast<uint64_t>(c.row_step) * c.height > c.data.size())
       return "data shorter than width, height and steps say";
@@ -525,6 +586,7 @@ class LiverSimNode {
     s.registration_inlier_fraction = registered_.inlier_fraction;
     s.registration_rms_all = registered_.rms_all;
     s.target_radius_95 = largest_radius_95();
+    s.faults = guard_.faults();
     for (bool held : registration_->supports_held()) s.supports_held += held;
     instruments_->fill_status(*model_, s);
     const Eigen::Isometry3d& a = registration_->alignment();
@@ -656,7 +718,7 @@ class LiverSimNode {
 
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
     using diagnostic_msgs::DiagnosticStatus;
-    const unsigned char level = state_ == "diverged" ? DiagnosticStatus::ERROR
+    const unsigned char level = state_ == "diverged" || state_ == "fault" ? DiagnosticStatus::ERROR
                                 : state_ == "iterating" ? DiagnosticStatus::WARN
                                                         : DiagnosticStatus::OK;
     stat.summary(level, state_);
@@ -664,6 +726,8 @@ class LiverSimNode {
     stat.add("last step time (s)", last_.timing.total_ms / 1000.0);
     stat.add("residual", last_.residual);
     stat.add("active contacts", last_.contacts);
+    stat.add("faults", guard_.faults());
+    stat.add("last fault", guard_.last_fault());
     std::lock_guard<std::mutex> lock(mutex_);
     stat.add("rejected inputs", rejected_);
     stat.add("point clouds received", clouds_);
@@ -705,6 +769,7 @@ class LiverSimNode {
   // Simulation thread only.
   Eigen::VectorXd published_positions_;  // of the last mesh sent
   bool display_due_ = true;
+  StepGuard guard_;
   StepResult last_;
   uint64_t steps_ = 0;
   std::string state_ = "idle";

@@ -8,7 +8,6 @@
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
-#include <tuple>
 
 namespace liver_sim {
 namespace {
@@ -145,20 +144,17 @@ std::string RosInstruments::merge(const InstrumentCommand& c, InstrumentOptions&
     declared.enabled = false;  // until its first pose
     shape = declared;
   }
-  // Bounds of the message (InstrumentCommand.msg): an instrument of the abdomen, not of a building.
-  const std::tuple<const char*, double, double> sizes[] = {{"radius", c.radius, 0.05},
-                                                           {"length", c.length, 0.5},
-                                                           {"inner_radius", c.inner_radius, 0.05},
-                                                           {"outer_radius", c.outer_radius, 0.05}};
-  for (const auto& [field, value, most] : sizes)
-    if (!std::isfinite(value) || value < 0 || value > most)
-      return k + field + " must be in (0, " + std::to_string(most).substr(0, 4) + "] m (0 keeps the current value)";
+  // Zero keeps a value; the bounds are the core's (validate below names the field).
+  const std::pair<const char*, double> sizes[] = {
+      {"radius", c.radius}, {"length", c.length}, {"inner_radius", c.inner_radius}, {"outer_radius", c.outer_radius}};
+  for (const auto& [field, value] : sizes)
+    if (!std::isfinite(value) || value < 0) return k + field + " must be finite and > 0 (0 keeps the current value)";
   if (c.radius > 0) shape.radius = c.radius;
   if (c.length > 0) shape.length = c.length;
   if (c.inner_radius > 0) shape.inner_radius = c.inner_radius;
   if (c.outer_radius > 0) shape.outer_radius = c.outer_radius;
   if (shape.type == Type::Tube) {
-    if (!std::isfinite(c.suction) || c.suction < 0 || c.suction > 1e5) return k + "suction must be in [0, 1e5] Pa";
+    if (!std::isfinite(c.suction)) return k + "suction must be finite";
     shape.suction = c.suction;
   }
   if (shape.type == Type::Grasper) shape.closed = c.grasp;

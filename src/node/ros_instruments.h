@@ -25,8 +25,6 @@ namespace liver_sim {
 
 class RosInstruments {
  public:
-  static constexpr int kMaxInstruments = 16;  // named instruments at once (scene's included)
-
   struct Settings {
     std::string frame_id;            // the model frame
     InstrumentOptions tool;          // the default instrument `tool`, out of the scene until posed

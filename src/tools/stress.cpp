@@ -1,7 +1,9 @@
 // Numerical stress matrix: the aspiration cube pushed to extreme parameters, time steps, loads
-// and meshes, and instruments in extreme contact on the probe cube. Each case has an expected outcome: converged (static: within 10 steps; dynamic:
-// every step), or detected as diverging for a stated reason and rolled back to the exact state
-// before the step, with nothing non-finite left in the model.
+// and meshes, instruments in extreme contact on the probe cube, and steps of each instrument type
+// made to fail (the stepper's test hook). Each case has an expected outcome: converged (static:
+// within 10 steps; dynamic: every step), or detected as diverging (or throwing) for a stated
+// reason and rolled back to the exact state before the step, every observable value to the last
+// bit (LiverModel::observable_state), with nothing non-finite left in the model.
 //   stress [--quick] [--group NAME] [--set K=V]... [--scene FILE] [--csv FILE]
 // (--group: the cases of one group, e.g. contact; --set: a scene override applied to every case
 // after its own, e.g. solver.strategy=full_newton; --scene: the default scene's replacement)
@@ -17,6 +19,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "liver_sim/liver_model.h"
@@ -29,6 +32,7 @@ using namespace liver_sim;
 // ("stalled", "residual blow-up", "energy growth", ...).
 constexpr const char* kConverged = "converged";
 constexpr const char* kStalled = "stalled";
+constexpr const char* kException = "exception";  // the step threw (an injected fault)
 
 struct Case {
   std::string group, name;
@@ -43,6 +47,9 @@ struct Case {
   std::vector<std::string> expected = {kConverged};
   std::string scene = {};                         // empty: the default scene
   std::vector<InstrumentOptions> instruments = {};  // added to the scene's
+  // A fault injected into step `fault_step` (1-based; 0: none) through the stepper's test hook.
+  NewtonStepper::InjectedFault fault = NewtonStepper::InjectedFault::None;
+  int fault_step = 0;
 };
 
 struct Outcome {
@@ -142,8 +149,20 @@ Outcome run(const Case& c, const std::string& scene_path) {
   const auto t0 = std::chrono::steady_clock::now();
   o.result = "FAILED";
   for (int k = 0; k < budget; ++k) {
-    const Eigen::VectorXd before = m.positions();
-    const StepResult r = m.step();
+    const std::vector<double> before = m.observable_state();
+    if (k + 1 == c.fault_step) m.stepper().inject_fault(c.fault);
+    StepResult r;
+    try {
+      r = m.step();
+    } catch (const std::exception& e) {
+      ++o.steps;
+      const bool restored = same_bits(m.observable_state(), before);
+      o.result = restored ? "detected" : "FAILED";
+      o.reason = kException;
+      o.detail = std::string("step ") + std::to_string(k + 1) + " threw: " + e.what() +
+                 (restored ? ", rolled back bitwise" : ", NOT rolled back bitwise");
+      break;
+    }
     ++o.steps;
     o.newton += r.iterations;
     o.factorizations += r.factorizations;
@@ -157,10 +176,10 @@ Outcome run(const Case& c, const std::string& scene_path) {
       break;
     }
     if (r.status == StepResult::Status::Diverged) {
-      const bool restored = (m.positions() - before).cwiseAbs().maxCoeff() == 0;
+      const bool restored = same_bits(m.observable_state(), before);
       o.result = restored ? "detected" : "FAILED";
       o.reason = r.message.substr(0, r.message.find(':'));
-      o.detail = r.message + (restored ? ", rolled back" : ", NOT rolled back");
+      o.detail = r.message + (restored ? ", rolled back bitwise" : ", NOT rolled back bitwise");
       break;
     }
     if (r.converged()) {
@@ -241,6 +260,58 @@ void contact_cases(std::vector<Case>& v) {
       {instrument("probe", Type::Probe, 0.0003, {{0, V3(8.1, 7.8, 15.5)}, {0.01, V3(8.1, 7.8, 14.3)}})}, 15, true);
 }
 
+// Each instrument type pressing (a grasper lifting) for five frames, the fifth made to fail
+// through the stepper's test hook: an exception after its first Newton update, or a negative
+// pivot in its factorisation. The step must be rolled back to the bits of the fourth frame's end,
+// the instrument's reaction and contacts included.
+void failure_cases(std::vector<Case>& v) {
+  using Type = InstrumentOptions::Type;
+  using Fault = NewtonStepper::InjectedFault;
+  using V3 = Eigen::Vector3d;
+  const std::vector<std::string> dynamic = {"solver.mode=dynamic", "solver.dt=0.001", "solver.tolerance=1e-6"};
+  // The shaft 0.1 mm a frame (at 0.3 mm a frame, 0.7 mm deep with 20 contacts along it, frame 4
+  // reached the iteration cap).
+  InstrumentOptions shaft = instrument("shaft", Type::Shaft, 0.002, {{0, V3(2.5, 7.5, 17.3)}, {0.03, V3(2.5, 7.5, 14.3)}});
+  shaft.length = 0.01;
+  shaft.orientation = Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY()));  // lying along x
+  for (auto& k : shaft.trajectory) k.orientation = shaft.orientation;
+  InstrumentOptions grasper = instrument("grasper", Type::Grasper, 0.002, {{0, V3(7.5, 7.5, 15)}, {0.01, V3(7.5, 7.5, 17)}});
+  grasper.trajectory[0].closed = true;
+  const std::vector<std::pair<std::string, InstrumentOptions>> instruments = {
+      {"probe", instrument("probe", Type::Probe, 0.002, {{0, V3(7.5, 7.5, 17.5)}, {0.01, V3(7.5, 7.5, 14.5)}})},
+      {"shaft", shaft},
+      {"grasper", grasper}};
+  for (const auto& [fault, reason, what] : {std::make_tuple(Fault::Exception, kException, "an exception"),
+                                           std::make_tuple(Fault::NotPositiveDefinite, "tangent matrix is not positive definite",
+                                                           "a negative pivot")}) {
+    for (const auto& [name, o] : instruments) {
+      Case c{"failure", name + " pressing, " + what + " in frame 5", dynamic, {}, {}, 5, name == "probe"};
+      c.scene = LIVER_SIM_PROBE_SCENE;
+      c.instruments = {o};
+      c.expected = {reason};
+      c.fault = fault;
+      c.fault_step = 5;
+      v.push_back(std::move(c));
+    }
+    // The aspiration tube's scene (3 kPa of suction), the tube pressed 0.1 mm further per frame.
+    Case c{"failure", std::string("tube sucking, ") + what + " in frame 5", {"solver.mode=dynamic", "solver.dt=0.005"},
+           {}, [](LiverModel& m) {
+             InstrumentOptions tube = m.instrument(0);
+             tube.trajectory.resize(2);
+             tube.trajectory[0].position = tube.position;
+             tube.trajectory[1].t = 0.05;
+             tube.trajectory[1].position = tube.position - Eigen::Vector3d(0, 0, 1e-3);
+             m.update_instrument(0, tube);
+           },
+           5, true};
+    c.scene = LIVER_SIM_TUBE_SCENE;
+    c.expected = {reason};
+    c.fault = fault;
+    c.fault_step = 5;
+    v.push_back(std::move(c));
+  }
+}
+
 std::vector<Case> cases() {
   std::vector<Case> v;
   const std::vector<std::string> stalls = {kStalled};
@@ -278,6 +349,7 @@ std::vector<Case> cases() {
   v.push_back({"100 kPa step", "pressure +100 kPa, no line search, static", {"loads.0.value=1e5", "solver.line_search=false"},
                {}, {}, 1, false, chaotic});
   contact_cases(v);
+  failure_cases(v);
   return v;
 }
 
