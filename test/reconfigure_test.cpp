@@ -100,7 +100,7 @@ class Reconfigure : public ::testing::Test {
       pose_pub_.publish(p);
     });
     EXPECT_TRUE(wait_for([&] { return status_.header.stamp > sent + ros::Duration(0.3) && status_.state == "idle"; }, 120.0))
-        << status_.state;
+        << status_.state << ": " << status_.text << " residual " << status_.residual << " it " << status_.iterations;
     return status_;
   }
   // Steps the model took for the statuses since the last press.
