@@ -244,8 +244,16 @@ void RosInstruments::on_pose(const std::string& name, const geometry_msgs::PoseS
     lock.unlock();
     return reject_(topic + ": the instrument follows tf frame '" + it->second.frame + "'");
   }
-  set_pose(it->second, make_pose(Eigen::Vector3d(p.pose.position.x, p.pose.position.y, p.pose.position.z), q),
-           msg->header.stamp, ros::Time::now());
+  // Refused on arrival, as the model would refuse it (a later pose may replace it before a frame).
+  InstrumentOptions posed = it->second.shape;
+  posed.position = Eigen::Vector3d(p.pose.position.x, p.pose.position.y, p.pose.position.z);
+  posed.orientation = q;
+  const std::string error = validate(posed);
+  if (!error.empty()) {
+    lock.unlock();
+    return reject_(topic + ": " + error);
+  }
+  set_pose(it->second, make_pose(posed.position, q), msg->header.stamp, ros::Time::now());
 }
 
 void RosInstruments::set_pose(Tracked& t, const Eigen::Isometry3d& pose, const ros::Time& stamp,
