@@ -30,8 +30,11 @@ import struct
 import sys
 import threading
 import time
+import xmlrpc.client
 
 import numpy as np
+import rosgraph
+import rosnode
 import rospy
 from geometry_msgs.msg import PoseStamped
 from liver_sim.msg import SimulationStatus
@@ -66,15 +69,16 @@ def marker_fields(raw):
 
 
 def node_pid():
-    for pid in os.listdir("/proc"):
-        if pid.isdigit():
-            try:
-                with open("/proc/%s/cmdline" % pid, "rb") as f:
-                    if b"liver_sim_node" in f.read().split(b"\0")[0]:
-                        return int(pid)
-            except OSError:
-                pass
-    return None
+    """The pid of the node this soak talks to, as it reports itself through the master (other
+    liver_sim_node processes may run on the machine, under other masters)."""
+    try:
+        api = rosnode.get_api_uri(rosgraph.Master(rospy.get_name()), rospy.resolve_name("liver_sim"))
+        if api is None:
+            return None
+        code, _, pid = xmlrpc.client.ServerProxy(api).getPid(rospy.get_name())
+        return int(pid) if code == 1 else None
+    except (rosnode.ROSNodeIOException, OSError, xmlrpc.client.Error):
+        return None
 
 
 def rss_mb(pid):
