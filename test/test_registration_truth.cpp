@@ -525,6 +525,7 @@ TEST(TissueStiffness, TheCloudsCallForTheTruthsStiffness) {
     Beam beam(false);
     beam.truth_scene.parenchyma.young_modulus *= truth_factor;
     beam.model_scene.registration.candidate_supports.clear();
+    beam.model_scene.registration.max_tissue_stiffness_factor = 4;
     const pcl::PointCloud<pcl::PointXYZ> top = beam.top_cloud();
     LiverModel model(beam.mesh, beam.model_scene);
     ASSERT_TRUE(model.step().converged());
@@ -551,6 +552,7 @@ TEST(TissueStiffness, APatchTheModelCannotExplainDoesNotDecideIt) {
   Beam beam(false);
   beam.truth_scene.parenchyma.young_modulus *= 2;
   beam.model_scene.registration.candidate_supports.clear();
+  beam.model_scene.registration.max_tissue_stiffness_factor = 4;
   pcl::PointCloud<pcl::PointXYZ> top = beam.top_cloud();
   for (pcl::PointXYZ& p : top)
     if (p.x > 0.02 && p.x < 0.03) p.z += 0.003f;

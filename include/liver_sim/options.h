@@ -181,7 +181,7 @@ struct RegistrationOptions {
   // The tissue's stiffness factor the clouds may call for (SurfaceRegistration::
   // estimate_tissue_stiffness): a factor on every Young's modulus of the scene, kept within
   // [1 / max, max]; 1: the scene's stiffness stands.
-  double max_tissue_stiffness_factor = 4.0;  // -, >= 1
+  double max_tissue_stiffness_factor = 1.0;  // -, >= 1
   UncertaintyOptions uncertainty;
 };
 
