@@ -23,7 +23,7 @@ SIMULATE = os.path.join(REPO, "build/ws/devel/lib/liver_sim/simulate")
 CASES = [
     ("aspiration_cube.yaml", (0.0075, 0.0075), 0.015,
      [("0", 0.003, -0.01), ("~10", 0.004, 0.0012), ("~100", 0.05, 0.0006)]),
-    ("liver_phantom.yaml", (0.05, -0.02), 0.039,
+    ("liver_phantom.yaml", (-0.05, -0.02), 0.039,
      [("0", 0.008, -0.02), ("~10", 0.02, 0.006), ("~100", 0.15, 0.012)]),
 ]
 

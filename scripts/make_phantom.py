@@ -5,6 +5,12 @@
                                     lobes with a flattened inferior face
   config/phantom/portal.vtk         portal vein tree (legacy VTK polydata: radius, wall_thickness)
   config/phantom/hepatic.vtk        hepatic vein tree
+
+The files are in the package's frame, the patient's LPS (doc/patient_model.md): +x toward the
+patient's left, +y posterior, +z superior; the right lobe (the larger) lies at -x. The lobes and
+trees below are laid out in their mirror image (the right lobe at +x) and reflected, x -> -x,
+when written: the mesh is then exactly the mirror of the one gmsh makes from these shapes, node
+for node, so its physics is the same to round-off.
   config/phantom/sofa_liver_portal.vtk, sofa_liver2_portal.vtk
                                     portal-like trees inside the two external SOFA liver meshes
                                     (../shared/data/sofa-liver, scales 0.03 and 0.1), when present
@@ -71,7 +77,35 @@ def make_mesh(path, size=MESH_SIZE):
     _, elem_tags, _ = gmsh.model.mesh.getElements(3)
     count = sum(len(t) for t in elem_tags)
     gmsh.finalize()
+    reflect_msh(path)
     return count
+
+
+def negate(token):
+    """-x of a number as text, exactly (no re-printing); zero stays zero."""
+    if float(token) == 0.0:
+        return token
+    return token[1:] if token.startswith("-") else "-" + token
+
+
+def reflect_msh(path):
+    """Reflects a Gmsh 2.2 ASCII mesh in x, in place: node x negated, each tetrahedron's last two
+    nodes swapped so that its volume stays positive."""
+    with open(path) as f:
+        lines = f.read().split("\n")
+    section = None
+    for i, line in enumerate(lines):
+        if line.startswith("$"):
+            section = line
+            continue
+        fields = line.split(" ")
+        if section == "$Nodes" and len(fields) == 4:
+            fields[1] = negate(fields[1])
+        elif section == "$Elements" and len(fields) > 3 and fields[1] == "4":
+            fields[-2], fields[-1] = fields[-1], fields[-2]
+        lines[i] = " ".join(fields)
+    with open(path, "w") as f:
+        f.write("\n".join(lines))
 
 
 def unit(v):
@@ -119,6 +153,12 @@ class Tree:
             self.branch(last, rotate(d, axis, sign * math.radians(32)), 0.72 * length, 0.75 * radius,
                         depth - 1, spin + math.pi / 2)
 
+    def reflected(self):
+        """The tree reflected in x (into LPS, as the phantom's mesh)."""
+        for p in self.points:
+            p[0] = 0.0 - p[0]  # no negative zero in the file
+        return self
+
     def write_vtk(self, path, title):
         n = len(self.points)
         with open(path, "w") as f:
@@ -141,7 +181,7 @@ def portal_tree():
     hilum = t.node((0.000, -0.005, Z_CUT + MARGIN + 0.001), 0.0060)
     t.branch(hilum, (0.0, 0.1, 1.0), 0.018, 0.0060, 0, 0.0)
     trunk_end = len(t.points) - 1
-    t.branch(trunk_end, (1.0, 0.0, 0.35), 0.045, 0.0045, 3, 0.0)    # right portal vein
+    t.branch(trunk_end, (1.0, 0.0, 0.35), 0.045, 0.0045, 3, 0.0)    # right portal vein (+x before the reflection)
     t.branch(trunk_end, (-1.0, 0.15, 0.3), 0.040, 0.0040, 3, 0.0)   # left portal vein
     return t
 
@@ -201,7 +241,7 @@ def main():
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     tets = make_mesh(os.path.join(args.out, "liver_phantom.msh"))
-    trees = [("portal", portal_tree()), ("hepatic", hepatic_tree())]
+    trees = [("portal", portal_tree().reflected()), ("hepatic", hepatic_tree().reflected())]
     sofa = os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", "..", "shared", "data", "sofa-liver")
     for mesh, scale in (("liver", 0.03), ("liver2", 0.1)):  # file units -> m, as in the tests
         path = os.path.join(sofa, mesh + ".msh")

@@ -28,11 +28,10 @@ import make_phantom
 
 PHANTOM = os.path.realpath(os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", "config", "phantom"))
 MODEL_YOUNG_MODULUS = 30000.0  # Pa, config/scenes/liver_phantom.yaml
-# The attachment the model is not given (config/scenes/liver_phantom.yaml lists these places
-# among its candidate supports, with two more).
+# The attachment the model is not given, in the phantom's LPS frame (the right lobe at -x).
 UNKNOWN_SUPPORTS = {
-    "right_triangular": "  - sphere: {center: [0.105, 0.035, 0.025], radius: 0.02}         # right triangular ligament: unknown to the model\n",
-    "hepatorenal": "  - sphere: {center: [0.08, 0.05, -0.03], radius: 0.02}            # hepatorenal ligament: unknown to the model\n",
+    "right_triangular": "  - sphere: {center: [-0.105, 0.035, 0.025], radius: 0.02}        # right triangular ligament: unknown to the model\n",
+    "hepatorenal": "  - sphere: {center: [-0.08, 0.05, -0.03], radius: 0.02}           # hepatorenal ligament: unknown to the model\n",
     "none": "",
 }
 
@@ -46,18 +45,18 @@ vessels:
   - {{name: hepatic, file: {phantom}/hepatic.vtk, young_modulus: 0.62e6, poisson_ratio: 0.45}}
 fixed:
   - sphere: {{center: [0.0, 0.07, 0.03], radius: 0.03}}             # bare area and vena cava (as the model)
-  - box: {{min: [-0.035, -0.08, 0.02], max: [-0.025, 0.0, 0.08]}}   # falciform ligament (as the model)
+  - box: {{min: [0.025, -0.08, 0.02], max: [0.035, 0.0, 0.08]}}     # falciform ligament (as the model)
 {unknown}loads:
   - {{type: gravity, acceleration: [0, 0, -9.81]}}
 solver: {{mode: static, strategy: newton_krylov, max_iterations: 100, tolerance: 1.0e-9}}
 probes:                     # the model's tumour points (config/scenes/liver_phantom.yaml)
-  - {{name: tumour_centre, point: [0.050, -0.020, 0.005]}}
-  - {{name: tumour_x+, point: [0.062, -0.020, 0.005]}}
-  - {{name: tumour_x-, point: [0.038, -0.020, 0.005]}}
-  - {{name: tumour_y+, point: [0.050, -0.008, 0.005]}}
-  - {{name: tumour_y-, point: [0.050, -0.032, 0.005]}}
-  - {{name: tumour_z+, point: [0.050, -0.020, 0.017]}}
-  - {{name: tumour_z-, point: [0.050, -0.020, -0.007]}}
+  - {{name: tumour_centre, point: [-0.050, -0.020, 0.005]}}
+  - {{name: tumour_x+, point: [-0.038, -0.020, 0.005]}}
+  - {{name: tumour_x-, point: [-0.062, -0.020, 0.005]}}
+  - {{name: tumour_y+, point: [-0.050, -0.008, 0.005]}}
+  - {{name: tumour_y-, point: [-0.050, -0.032, 0.005]}}
+  - {{name: tumour_z+, point: [-0.050, -0.020, 0.017]}}
+  - {{name: tumour_z-, point: [-0.050, -0.020, -0.007]}}
 """
 
 

@@ -80,7 +80,7 @@ def main():
         msg.header.stamp = rospy.get_rostime()
         # Pressing 2-6 mm (0.4 Hz), sweeping 1 cm along x (0.2 Hz).
         depth = 0.004 + 0.002 * math.sin(2 * math.pi * 0.4 * t)
-        msg.pose.position.x = 0.050 + 0.005 * math.sin(2 * math.pi * 0.2 * t)
+        msg.pose.position.x = -0.050 + 0.005 * math.sin(2 * math.pi * 0.2 * t)
         msg.pose.position.y = -0.020
         msg.pose.position.z = SURFACE_Z + RADIUS - depth
         msg.pose.orientation.w = 1.0

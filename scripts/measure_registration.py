@@ -67,7 +67,7 @@ def main():
         time.sleep(0.2)
     rng = np.random.default_rng(1)
     base = surface_samples(state["mesh"], 2e-3, rng)
-    bump = 8e-3 * np.exp(-np.sum((base[:, :2] - [0.06, -0.03]) ** 2, axis=1) / (2 * 0.04**2))
+    bump = 8e-3 * np.exp(-np.sum((base[:, :2] - [-0.06, -0.03]) ** 2, axis=1) / (2 * 0.04**2))
 
     sent, t0 = [], time.time()
     k = 0

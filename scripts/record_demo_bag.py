@@ -32,7 +32,7 @@ SURFACE_Z = 0.039  # m, height of the sagged surface under the probe (static equ
 def probe_position(t, duration):
     """Approach (0-20%), press (20-40%), slide (40-70%), withdraw (70-100%)."""
     s = t / duration
-    x0, y0 = 0.050, -0.020
+    x0, y0 = -0.050, -0.020
     above = SURFACE_Z + RADIUS + 0.004
     pressed = SURFACE_Z + RADIUS - 0.005
     if s < 0.2:
@@ -40,8 +40,8 @@ def probe_position(t, duration):
     if s < 0.4:
         return x0, y0, above + (pressed - above) * (s - 0.2) / 0.2
     if s < 0.7:
-        return x0 + 0.010 * (s - 0.4) / 0.3, y0, pressed
-    return x0 + 0.010, y0, pressed + (above - pressed) * (s - 0.7) / 0.3
+        return x0 - 0.010 * (s - 0.4) / 0.3, y0, pressed
+    return x0 - 0.010, y0, pressed + (above - pressed) * (s - 0.7) / 0.3
 
 
 def sagged_top_surface():
@@ -63,7 +63,7 @@ def sagged_top_surface():
     n /= np.linalg.norm(n, axis=1)[:, None]
     c = boundary.mean(axis=1)
     # Outward normals (positively oriented tetrahedra) facing up, over the right lobe.
-    keep = (n[:, 2] > 0.3) & (c[:, 0] > 0.0) & (c[:, 0] < 0.1) & (c[:, 1] > -0.05) & (c[:, 1] < 0.03)
+    keep = (n[:, 2] > 0.3) & (c[:, 0] < 0.0) & (c[:, 0] > -0.1) & (c[:, 1] > -0.05) & (c[:, 1] < 0.03)
     return boundary[keep]
 
 

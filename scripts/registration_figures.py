@@ -6,15 +6,19 @@ parenchyma E = 15 kPa, the right triangular ligament attached, which the model d
 into BUILD/truth, then runs register_bench (depth camera, 10 frames per case) and writes into
 OUT (default doc/):
   registration_grid.csv          4 surgical scenarios x model stiffness 0.5, 1, 2 x the truth's
-                                 (30% visible, 1 mm depth noise at 25 cm)
+                                 (30% visible, 1 mm depth noise at 25 cm), the scene's settings
   registration_grid_targets.csv  every target's error and covariance of those cases
+  registration_grid_estimated.csv the same cases with the tissue's stiffness estimated from the
+                                 clouds (registration.max_tissue_stiffness_factor 4)
   registration_sweep.csv         the lift, model 2x too stiff: visible fraction and depth noise
   registration_crime.csv         the same sweep against the model's own lift (the inverse crime)
+  registration_sweep_estimated.csv  the depth-noise sweep with the stiffness estimated
   registration_tre_visible.png   TRE (mean, p95) against visible fraction, truth and crime
   registration_tre_noise.png     TRE against depth noise, truth and crime
-  registration_tre_stiffness.png TRE per scenario against the model's stiffness error
+  registration_tre_stiffness.png TRE p95 per scenario against the model's stiffness error,
+                                 fixed and estimated
 then prints the Markdown tables of doc/registration.md and the ellipsoids' calibration.
-Pin it: taskset -c 0 /usr/bin/python3 scripts/registration_figures.py   (about 15 min)
+Pin it: taskset -c 0 /usr/bin/python3 scripts/registration_figures.py   (about 20 min)
   --quick   2 frames, the lift only, one case per sweep (the smoke run)
 """
 import argparse
@@ -34,6 +38,7 @@ BENCH = os.path.join(REPO, "build/ws/devel/lib/liver_sim/register_bench")
 SCENE = os.path.join(REPO, "config/scenes/liver_phantom.yaml")
 TRUTH_STIFFNESS = 0.5  # truth E over the model's (make_truth_phantom.py --stiffness-ratio)
 SCENARIOS = ["lift", "press", "breathing", "pneumoperitoneum"]
+ESTIMATE = ["--set", "registration.max_tissue_stiffness_factor=4"]
 
 
 def fmt(values):
@@ -74,18 +79,19 @@ def plot_sweep(truth, crime, key, scale, xlabel, path):
     plt.close(fig)
 
 
-def plot_stiffness(grid, path):
+def plot_stiffness(grid, fixed, path):
     fig, ax = plt.subplots(figsize=(5, 3.6))
     for k, s in enumerate(SCENARIOS):
-        rows = [r for r in grid if r["scenario"] == s]
-        x = [float(r["stiffness_ratio"]) for r in rows]
-        ax.plot(x, [float(r["tre_mean_mm"]) for r in rows], "o-", color=f"C{k}", label=f"{s}: mean")
-        ax.plot(x, [float(r["tre_p95_mm"]) for r in rows], "s--", color=f"C{k}", mfc="none", label=f"{s}: p95")
+        for rows, style, how in ((grid, "o-", "estimated"), (fixed, "s--", "fixed")):
+            rows = [r for r in rows if r["scenario"] == s]
+            if rows:
+                ax.plot([float(r["stiffness_ratio"]) for r in rows], [float(r["tre_p95_mm"]) for r in rows], style,
+                        color=f"C{k}", mfc="none" if how == "fixed" else None, label=f"{s}, {how}")
     ax.set_xscale("log", base=2)
     ax.axhline(3.0, color="grey", lw=0.8, ls=":")
     ax.axhline(5.0, color="grey", lw=0.8, ls="-.")
-    ax.set_xlabel("model stiffness / truth stiffness")
-    ax.set_ylabel("TRE (mm)")
+    ax.set_xlabel("model stiffness / truth stiffness (before registration)")
+    ax.set_ylabel("TRE p95 (mm)")
     ax.set_ylim(bottom=0)
     ax.legend(fontsize=6, ncol=2)
     fig.tight_layout()
@@ -94,8 +100,8 @@ def plot_stiffness(grid, path):
 
 
 def table(rows, first):
-    print(f"| {first} | TRE mean | p95 | max | tumour mean | bifurcation mean | unregistered mean | inside 95% | frame (median) |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print(f"| {first} | TRE mean | p95 | max | tumour mean | bifurcation mean | unregistered mean | inside 95% | stiffness found | cloud CPU (median) |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         head = {"grid": f"{r['scenario']}, model x{float(r['stiffness_ratio']):g}",
                 "visible": f"{100 * float(r['visible_fraction']):.0f}% visible, {1e3 * float(r['noise_m']):g} mm",
@@ -103,7 +109,16 @@ def table(rows, first):
         print(f"| {head} | {float(r['tre_mean_mm']):.2f} mm | {float(r['tre_p95_mm']):.2f} mm | {float(r['tre_max_mm']):.2f} mm "
               f"| {float(r['tumour_mean_mm']):.2f} mm | {float(r['bifurcation_mean_mm']):.2f} mm "
               f"| {float(r['tre_unregistered_mean_mm']):.2f} mm | {100 * float(r['inside_95']):.0f}% "
-              f"| {float(r['frame_median_ms']):.0f} ms |")
+              f"| {float(r['stiffness_ratio']) * float(r['tissue_factor']):.2f} | {float(r['frame_cpu_median_ms']):.0f} ms |")
+
+
+def compare(grid, fixed):
+    print("| case | fixed: TRE mean | p95 | estimated: TRE mean | p95 | stiffness found |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for a, b in zip(fixed, grid):
+        print(f"| {a['scenario']}, model x{float(a['stiffness_ratio']):g} | {float(a['tre_mean_mm']):.2f} mm "
+              f"| {float(a['tre_p95_mm']):.2f} mm | {float(b['tre_mean_mm']):.2f} mm | {float(b['tre_p95_mm']):.2f} mm "
+              f"| {float(b['stiffness_ratio']) * float(b['tissue_factor']):.2f} |")
 
 
 def main():
@@ -130,19 +145,28 @@ def main():
     grid = bench(args, ["--truth-scene", truth, "--scenario", ",".join(scenarios), "--stiffness", fmt(model_scales)],
                  os.path.join(args.out, "registration_grid_targets.csv"))
     write(grid, os.path.join(args.out, "registration_grid.csv"))
+    estimated = bench(args, ["--truth-scene", truth, "--scenario", ",".join(scenarios), "--stiffness", fmt(model_scales)]
+                      + ESTIMATE)
+    write(estimated, os.path.join(args.out, "registration_grid_estimated.csv"))
     two = [f"{TRUTH_STIFFNESS * 2:g}"]
     sweep_v = bench(args, ["--truth-scene", truth, "--stiffness", two[0], "--visible", fmt(visible)])
     sweep_n = bench(args, ["--truth-scene", truth, "--stiffness", two[0], "--noise", fmt(noise)])
     crime_v = bench(args, ["--visible", fmt(visible)])
     crime_n = bench(args, ["--noise", fmt(noise)])
     write(sweep_v + sweep_n, os.path.join(args.out, "registration_sweep.csv"))
+    sweep_e = bench(args, ["--truth-scene", truth, "--stiffness", two[0], "--noise", fmt(noise)] + ESTIMATE)
+    write(sweep_e, os.path.join(args.out, "registration_sweep_estimated.csv"))
     write(crime_v + crime_n, os.path.join(args.out, "registration_crime.csv"))
     plot_sweep(sweep_v, crime_v, "visible_fraction", 100, "visible surface (%)", os.path.join(args.out, "registration_tre_visible.png"))
     plot_sweep(sweep_n, crime_n, "noise_m", 1e3, "depth noise at 25 cm (mm)", os.path.join(args.out, "registration_tre_noise.png"))
-    plot_stiffness(grid, os.path.join(args.out, "registration_tre_stiffness.png"))
+    plot_stiffness(estimated, grid, os.path.join(args.out, "registration_tre_stiffness.png"))
 
     print("\nIndependent truth, 30% visible, 1 mm depth noise:\n")
     table(grid, "grid")
+    print("\nThe same cases, the model's stiffness fixed and estimated:\n")
+    compare(estimated, grid)
+    print("\nThe lift, model 2x too stiff, over depth noise, the stiffness estimated:\n")
+    table(sweep_e, "visible")
     print("\nIndependent truth, lift, model 2x too stiff:\n")
     table(sweep_v + sweep_n, "visible")
     print("\nInverse crime (the model's own lift):\n")

@@ -39,6 +39,7 @@ import struct
 import sys
 import threading
 import time
+import xmlrpc.client
 
 import xmlrpc.client
 
@@ -111,7 +112,7 @@ class Soak:
         self.meshes = 0
         self.non_finite = set()   # topics on which a NaN or infinity was published
         rng = np.random.default_rng(0)
-        xyz = np.column_stack([rng.uniform(0.0, 0.1, points), rng.uniform(-0.05, 0.03, points),
+        xyz = np.column_stack([rng.uniform(-0.1, 0.0, points), rng.uniform(-0.05, 0.03, points),
                                rng.uniform(0.02, 0.06, points)]).astype(np.float32)
         self.cloud = point_cloud2.create_cloud_xyz32(Header(frame_id="liver"), xyz)
         self.empty = point_cloud2.create_cloud_xyz32(Header(frame_id="liver"), [])
@@ -160,7 +161,7 @@ class Soak:
             t = time.monotonic() - t0
             p = PoseStamped(header=Header(stamp=rospy.Time.now(), frame_id="liver"))
             # Circles of 3 mm at 0.5 Hz, pressing 3-5 mm.
-            p.pose.position.x = 0.05 + 0.003 * math.cos(math.pi * t)
+            p.pose.position.x = -0.05 + 0.003 * math.cos(math.pi * t)
             p.pose.position.y = -0.02 + 0.003 * math.sin(math.pi * t)
             p.pose.position.z = SURFACE_Z + RADIUS - 0.004 - 0.001 * math.sin(0.3 * t)
             p.pose.orientation.w = 1.0

@@ -60,7 +60,7 @@ TEST(PhantomNode, PublishesTheEquilibriumOfTheCoreModelWithVessels) {
   const double before = status.max_displacement;
   geometry_msgs::PoseStamped pose;
   pose.header.frame_id = "liver";
-  pose.pose.position.x = 0.05;
+  pose.pose.position.x = -0.05;
   pose.pose.position.y = -0.02;
   pose.pose.position.z = 0.039 + 0.0025 - 0.005;  // the launch's 2.5 mm probe radius
   pose.pose.orientation.w = 1;

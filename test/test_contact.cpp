@@ -349,7 +349,7 @@ TEST(SurfaceContact, ThinRodPressedBetweenNodesKeepsTheSurfaceOut) {
   const Eigen::MatrixX3i& boundary = equilibrium.boundary();
   auto corner = [&](int t, int k) { return Eigen::Vector3d(sagged.segment<3>(3 * boundary(t, k))); };
   // Spots: the centroids of the upward-facing triangles nearest to three points of the right lobe.
-  for (const Eigen::Vector2d& spot : {Eigen::Vector2d(0.046, -0.016), Eigen::Vector2d(0.07, 0.01), Eigen::Vector2d(0.03, -0.04)}) {
+  for (const Eigen::Vector2d& spot : {Eigen::Vector2d(-0.046, -0.016), Eigen::Vector2d(-0.07, 0.01), Eigen::Vector2d(-0.03, -0.04)}) {
     int best = -1;
     double best_distance = 1e9;
     for (int t = 0; t < boundary.rows(); ++t) {

@@ -445,6 +445,37 @@ TEST(PatientFrames, BareAreaIsPosteriorSuperior) {
   EXPECT_LT((r.center - Eigen::Vector3d(0.0, 0.07, 0.03)).norm(), 0.05);
 }
 
+// The phantom is a typical liver in the package's frame (LPS: +x the patient's left, +y
+// posterior, +z superior). The reference is anatomy: the right lobe, to the right of the
+// falciform ligament, holds most of the liver's volume (about 60-65%), and the bare area lies
+// posterior. The phantom's own labels must agree: the tumour is "in the right lobe", the
+// falciform ligament is the scene's anterior box. Kills: the phantom written unreflected
+// (make_phantom.py's layout, the larger lobe at +x: 19% of the volume on the right, and the
+// tumour on the left).
+TEST(PatientFrames, ThePhantomsRightLobeIsOnThePatientsRight) {
+  const Scene scene = load_scene(std::string(LIVER_SIM_SOURCE_DIR) + "/config/scenes/liver_phantom.yaml");
+  const TetMesh m = load_scene_mesh(scene);
+  ASSERT_EQ(scene.fixed.size(), 2u);
+  const Region& falciform = scene.fixed[1];
+  const double plane = 0.5 * (falciform.min.x() + falciform.max.x());
+  double right = 0, total = 0;
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (int t = 0; t < m.T.rows(); ++t) {
+    const double v = signed_volume(m.V, m.T, t);
+    ASSERT_GT(v, 0);
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 4; ++k) c += m.V.row(m.T(t, k)).transpose() / 4;
+    total += v;
+    centroid += v * c;
+    if (c.x() < plane) right += v;
+  }
+  centroid /= total;
+  EXPECT_GT(right / total, 0.55) << "the share of the volume on the patient's right (-x) of the falciform ligament";
+  EXPECT_LT(falciform.max.y(), centroid.y() + 1e-3) << "the falciform ligament on the anterior (-y) side";
+  EXPECT_GT(bare_area(phantom_surface()).center.y(), centroid.y()) << "the bare area posterior (+y)";
+  for (const ProbeOptions& p : scene.probes) EXPECT_LT(p.point.x(), plane) << p.name << " is not in the right lobe";
+}
+
 // ---- meshing
 
 // The phantom's boundary (2,540 triangles) meshed twice: the same nodes and tetrahedra bit for

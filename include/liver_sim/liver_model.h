@@ -48,6 +48,11 @@ class LiverModel {
   const CapsuleOptions& capsule() const { return mechanics_.capsule(); }
   int capsule_triangles() const { return mechanics_.capsule_triangles(); }
 
+  // A factor on the tissue's stiffness (MechanicalModel::set_stiffness_scale), from the next
+  // step on; the stepper's factor is made afresh. Throws std::invalid_argument unless finite, > 0.
+  void set_stiffness_scale(double s);
+  double stiffness_scale() const { return mechanics_.stiffness_scale(); }
+
   // Instruments (InstrumentContact); the scene's are added by the constructor.
   int add_instrument(const InstrumentOptions& o) { return contact_.add_instrument(o, stepper_.time()); }
   void update_instrument(int i, const InstrumentOptions& o) { contact_.update_instrument(i, o); }

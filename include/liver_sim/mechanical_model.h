@@ -99,6 +99,13 @@ class MechanicalModel {
   const CapsuleOptions& capsule() const { return capsule_; }
   int capsule_triangles() const;  // membrane triangles in use (0 when disabled)
 
+  // A factor on the whole tissue's stiffness (parenchyma, capsule, vessels: forces, tangent,
+  // energy, damping), as if every Young's modulus were multiplied by it: the registration's
+  // estimate of a patient stiffer or softer than the scene (registration.h). Default 1; must be
+  // finite and > 0 (std::invalid_argument).
+  void set_stiffness_scale(double s);
+  double stiffness_scale() const { return stiffness_scale_; }
+
   // A pressure load for a part that sets it step by step (an aspiration tube's suction); its
   // index for pressure_load().
   int add_pressure_load();
@@ -206,6 +213,7 @@ class MechanicalModel {
   Eigen::VectorXd energy_work_;
   double force_floor_ = 0;
   double length_scale_ = 0;
+  double stiffness_scale_ = 1;
 };
 
 }  // namespace liver_sim

@@ -193,6 +193,10 @@ struct RegistrationOptions {
   std::vector<Region> candidate_supports;
   double support_stiffness = 1e3;  // N/m, > 0: per surface node of a held candidate
   double support_gain = 0.15;      // -, in (0, 1): share of the cloud springs' patch pull a candidate must remove
+  // The tissue's stiffness factor the clouds may call for (SurfaceRegistration::
+  // estimate_tissue_stiffness): a factor on every Young's modulus of the scene, kept within
+  // [1 / max, max]; 1: the scene's stiffness stands.
+  double max_tissue_stiffness_factor = 1.0;  // -, >= 1
   UncertaintyOptions uncertainty;
 };
 

@@ -144,14 +144,27 @@ class SurfaceRegistration {
   // its effect); held candidates stay held until clear(). Returns the candidate newly held, or
   // -1. Costs one solve with three columns per candidate.
   int estimate_supports(StateCompliance& compliance);
+  // The tissue's stiffness factor (LiverModel::set_stiffness_scale) the clouds call for: the
+  // surface the camera sees is free of forces (but for the instruments), so the springs' net
+  // pull on the patches they touch, r_p, measures what the model gets wrong; a model too soft
+  // sags where the cloud does not, a model too stiff resists the cloud's deformation. One
+  // Gauss-Newton step on ln s minimising sum_p |r_p|^2, linearised at the state `compliance`
+  // was factorised at with the current springs: a factor e^t moves the state by
+  // -t A^-1 f_int, which changes r_p by t J_p, so t = -sum r_p.J_p / sum |J_p|^2 (at most a
+  // factor 2 per call, the factor within [1 / max, max] of options.max_tissue_stiffness_factor).
+  // Applied to the model from its next step; successive calls (one per analysis) converge it.
+  // Returns the factor (unchanged with max_tissue_stiffness_factor 1). Costs one solve with
+  // one column.
+  double estimate_tissue_stiffness(StateCompliance& compliance);
+
   // Per candidate: held, and the share of the springs' pull it took away when last tried.
   const std::vector<bool>& supports_held() const { return held_; }
   const std::vector<double>& support_gains() const { return gains_; }
   // The springs of the cloud alone (the model's springs also hold the held supports).
   const std::vector<SurfaceTarget>& cloud_springs() const { return cloud_springs_; }
 
-  // Removes the springs (the model relaxes at its next step), lets the supports go and forgets
-  // the rigid alignment.
+  // Removes the springs (the model relaxes at its next step), lets the supports go, forgets
+  // the rigid alignment and puts the tissue's stiffness factor back to 1.
   void clear();
   // The rigid alignment applied to every cloud (identity unless options.rigid_alignment).
   const Eigen::Isometry3d& alignment() const { return alignment_; }
@@ -204,7 +217,7 @@ class SurfaceRegistration {
     std::vector<double> weights;  // per node, by area, summing to 1
   };
   std::vector<Candidate> supports_;
-  SurfacePatches patches_;  // where the springs' pull is gathered (only with candidates)
+  SurfacePatches patches_;  // where the springs' pull is gathered (with candidates or the stiffness estimate)
   std::vector<bool> held_;
   std::vector<double> gains_;
 };

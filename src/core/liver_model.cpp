@@ -26,6 +26,12 @@ std::string LiverModel::set_capsule(const CapsuleOptions& capsule) {
   return "";
 }
 
+void LiverModel::set_stiffness_scale(double s) {
+  if (s == mechanics_.stiffness_scale()) return;
+  mechanics_.set_stiffness_scale(s);
+  stepper_.model_changed(/*refactorize=*/true);
+}
+
 void LiverModel::set_surface_targets(std::vector<SurfaceTarget> targets) {
   // A factor without springs (or with far weaker ones) preconditions badly; frame-to-frame
   // changes of the same cloud's springs keep it.

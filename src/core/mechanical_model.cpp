@@ -215,6 +215,13 @@ std::string MechanicalModel::set_capsule(const CapsuleOptions& capsule) {
   return "";
 }
 
+void MechanicalModel::set_stiffness_scale(double s) {
+  if (!(std::isfinite(s) && s > 0)) throw std::invalid_argument("the stiffness scale must be finite and > 0");
+  if (s == stiffness_scale_) return;
+  stiffness_scale_ = s;
+  rotations_at_.resize(0);  // the kept forces and energy are of the old scale
+}
+
 int MechanicalModel::capsule_triangles() const {
   return capsule_.enabled ? static_cast<int>(capsule_active_.size()) : 0;
 }
@@ -328,15 +335,19 @@ void MechanicalModel::internal_forces(const Eigen::VectorXd& x, Eigen::VectorXd&
       x.size(), f, [&](int first, int count, Vector12d* fe) { return tetra_.element_forces(first, count, x, fe); },
       [&](int t, Vector9d& fm) { return membrane_.element_force(t, x, fm); });
   if (!vessels_.empty()) vessels_.add_forces(x, f);
+  if (stiffness_scale_ != 1) {
+    f *= stiffness_scale_;
+    tissue_energy_at_ *= stiffness_scale_;
+  }
   rotations_at_ = x;
   internal_at_ = f;
 }
 
 double MechanicalModel::elastic_energy(const Eigen::VectorXd& x) {
   internal_forces(x, energy_work_);  // brings every rotation and beam frame to x (often already there)
-  double energy = tissue_energy_at_;
-  for (int e = 0; e < vessels_.num_beams(); ++e) energy += vessels_.beam_energy(e);
-  return energy;
+  double beams = 0;
+  for (int e = 0; e < vessels_.num_beams(); ++e) beams += vessels_.beam_energy(e);
+  return tissue_energy_at_ + stiffness_scale_ * beams;
 }
 
 void MechanicalModel::external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
@@ -409,6 +420,7 @@ void MechanicalModel::damping_forces(const Eigen::VectorXd& v, Eigen::VectorXd& 
         return 0.0;
       });
   vessels_.add_damping_forces(v, f);
+  if (stiffness_scale_ != 1) f *= stiffness_scale_;
 }
 
 void MechanicalModel::assemble(double k, double m, std::vector<double>& values) {
@@ -430,7 +442,8 @@ void MechanicalModel::assemble(double k, double m, std::vector<double>& values) 
   }
   vessels_.add_tangent(beam_map_, stiffness_);
   values.resize(stiffness_.size());
-  for (size_t i = 0; i < stiffness_.size(); ++i) values[i] = k * stiffness_[i];
+  const double tissue = k * stiffness_scale_;
+  for (size_t i = 0; i < stiffness_.size(); ++i) values[i] = tissue * stiffness_[i];
   // The targets' springs: external, so undamped; k w w^T (x) P per triangle, P = n n^T
   // (point-to-plane) or I.
   Matrix9d Kt;

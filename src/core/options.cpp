@@ -171,6 +171,9 @@ std::string validate(const RegistrationOptions& o) {
        o.full_coverage > 0 && o.full_coverage <= 1 ? "" : message("registration.full_coverage", "in (0, 1]", o.full_coverage),
        candidate_error(o.candidate_supports), positive("registration.support_stiffness", o.support_stiffness),
        o.support_gain > 0 && o.support_gain < 1 ? "" : message("registration.support_gain", "in (0, 1)", o.support_gain),
+       std::isfinite(o.max_tissue_stiffness_factor) && o.max_tissue_stiffness_factor >= 1
+           ? ""
+           : message("registration.max_tissue_stiffness_factor", ">= 1", o.max_tissue_stiffness_factor),
        within("registration.uncertainty.patch_spacing", o.uncertainty.patch_spacing, 1e-3, 1, "in [1e-3, 1] m"),
        non_negative("registration.uncertainty.force_ratio", o.uncertainty.force_ratio),
        non_negative("registration.uncertainty.stiffness_log_sd", o.uncertainty.stiffness_log_sd)});

@@ -145,7 +145,8 @@ SurfaceRegistration::SurfaceRegistration(LiverModel& model, const RegistrationOp
   }
   held_.assign(supports_.size(), false);
   gains_.assign(supports_.size(), 0.0);
-  if (!supports_.empty()) patches_ = make_surface_patches(model.mechanics(), options.uncertainty.patch_spacing);
+  if (!supports_.empty() || options.max_tissue_stiffness_factor > 1)
+    patches_ = make_surface_patches(model.mechanics(), options.uncertainty.patch_spacing);
 }
 
 void SurfaceRegistration::apply_springs() {
@@ -203,7 +204,40 @@ std::string SurfaceRegistration::set_stiffness(double stiffness) {
   return error;
 }
 
+double SurfaceRegistration::estimate_tissue_stiffness(StateCompliance& compliance) {
+  const double scale = model_.stiffness_scale();
+  if (cloud_springs_.empty() || options_.max_tissue_stiffness_factor == 1) return scale;
+  const Eigen::VectorXd& x = compliance.state();
+  const Eigen::MatrixX3i& F = model_.boundary();
+  const std::vector<Eigen::Vector3d> pull = patch_spring_forces(patches_, F, cloud_springs_, x);
+  Eigen::MatrixXd u;
+  compliance.solve(-compliance.internal_forces(), u);  // d x / d ln s
+  const std::vector<Eigen::Vector3d> moved = patch_spring_forces(patches_, F, cloud_springs_, x + u.col(0));
+  // Huber weights over the patches the springs touch, of width twice their median pull: an
+  // instrument pressing where the camera sees does not decide the tissue's stiffness.
+  std::vector<double> sizes;
+  for (const Eigen::Vector3d& r : pull)
+    if (r.squaredNorm() > 0) sizes.push_back(r.norm());
+  if (sizes.empty()) return scale;
+  std::nth_element(sizes.begin(), sizes.begin() + sizes.size() / 2, sizes.end());
+  const double width = 2 * sizes[sizes.size() / 2];
+  double along = 0, squared = 0;
+  for (size_t p = 0; p < pull.size(); ++p) {
+    const Eigen::Vector3d J = moved[p] - pull[p];  // the springs are linear in x
+    const double w = pull[p].norm() <= width ? 1.0 : width / pull[p].norm();
+    along += w * J.dot(pull[p]);
+    squared += w * J.squaredNorm();
+  }
+  if (!(squared > 0)) return scale;
+  const double step = std::clamp(-along / squared, -std::log(2.0), std::log(2.0));
+  const double bound = options_.max_tissue_stiffness_factor;
+  const double estimate = std::clamp(scale * std::exp(step), 1 / bound, bound);
+  model_.set_stiffness_scale(estimate);
+  return estimate;
+}
+
 void SurfaceRegistration::clear() {
+  model_.set_stiffness_scale(1.0);
   model_.set_surface_targets({});
   cloud_springs_.clear();
   held_.assign(supports_.size(), false);

@@ -209,7 +209,8 @@ class Reader {
     check_keys(g, "registration", {"stiffness", "metric", "voxel_size", "max_points", "max_distance", "trim_fraction",
                                    "huber_width", "correspondence_updates", "newton_iterations", "strategy",
                                    "rigid_alignment", "min_points", "min_coverage", "full_coverage",
-                                   "candidate_supports", "support_stiffness", "support_gain", "uncertainty"});
+                                   "candidate_supports", "support_stiffness", "support_gain", "max_tissue_stiffness_factor",
+                                   "uncertainty"});
     if (g["strategy"]) o.strategy = strategy(g["strategy"], "registration.strategy");
     if (g["newton_iterations"]) o.newton_iterations = integer(g["newton_iterations"], "registration.newton_iterations");
     if (g["stiffness"]) o.stiffness = number(g["stiffness"], "registration.stiffness");
@@ -235,6 +236,8 @@ class Reader {
     }
     if (g["support_stiffness"]) o.support_stiffness = number(g["support_stiffness"], "registration.support_stiffness");
     if (g["support_gain"]) o.support_gain = number(g["support_gain"], "registration.support_gain");
+    if (g["max_tissue_stiffness_factor"])
+      o.max_tissue_stiffness_factor = number(g["max_tissue_stiffness_factor"], "registration.max_tissue_stiffness_factor");
     if (const YAML::Node u = g["uncertainty"]) {
       check_keys(u, "registration.uncertainty", {"patch_spacing", "force_ratio", "stiffness_log_sd"});
       UncertaintyOptions& q = o.uncertainty;

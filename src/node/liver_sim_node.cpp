@@ -518,6 +518,7 @@ class LiverSimNode {
       analysis_stamp_ = ros::Time::now();
       const int held = registration_->estimate_supports(*compliance_);
       if (held >= 0) ROS_INFO("liver_sim: the clouds call for candidate support %d: held from the next cloud", held);
+      registration_->estimate_tissue_stiffness(*compliance_);  // registration.max_tissue_stiffness_factor 1: off
     } catch (const std::runtime_error& e) {
       ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", e.what());
     }

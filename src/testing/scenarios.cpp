@@ -157,8 +157,9 @@ LoadOptions underside_lift(const TetMesh& mesh, double newtons) {
   lift.vector = Eigen::Vector3d(0, 0, newtons);
   Region underside;
   underside.kind = Region::Kind::Box;
-  underside.min = Eigen::Vector3d(low.x() + 0.6 * (high.x() - low.x()), low.y() - 1e-3, low.z() - 1e-3);
-  underside.max = Eigen::Vector3d(high.x() + 1e-3, high.y() + 1e-3, low.z() + 0.25 * (high.z() - low.z()));
+  // The right lobe: the lowest 40% of x (LPS: the patient's right at -x).
+  underside.min = Eigen::Vector3d(low.x() - 1e-3, low.y() - 1e-3, low.z() - 1e-3);
+  underside.max = Eigen::Vector3d(high.x() - 0.6 * (high.x() - low.x()), high.y() + 1e-3, low.z() + 0.25 * (high.z() - low.z()));
   lift.region = underside;
   return lift;
 }
@@ -186,14 +187,14 @@ SurgicalScenario surgical_scenario(const std::string& name, const TetMesh& mesh)
   if (name == "lift") {
     s.loads.push_back(underside_lift(mesh, 5.0));
     // The retractor's blade under the lifted lobe, its shaft leaving anteriorly and down.
-    const int tip = nearest_surface_node(mesh, Eigen::Vector3d(low.x() + 0.8 * span.x(), low.y() + 0.5 * span.y(), low.z() - 0.05));
-    s.instruments.push_back({tip, mesh.V.row(tip).transpose() + Eigen::Vector3d(-0.02, -0.25, -0.06), 5e-3});
+    const int tip = nearest_surface_node(mesh, Eigen::Vector3d(low.x() + 0.2 * span.x(), low.y() + 0.5 * span.y(), low.z() - 0.05));
+    s.instruments.push_back({tip, mesh.V.row(tip).transpose() + Eigen::Vector3d(0.02, -0.25, -0.06), 5e-3});
   } else if (name == "press") {
     // Over the tumour (right lobe, anterior face), pressing posterior and a little down.
-    const int tip = nearest_surface_node(mesh, Eigen::Vector3d(low.x() + 0.75 * span.x(), low.y() - 0.1, low.z() + 0.45 * span.z()));
+    const int tip = nearest_surface_node(mesh, Eigen::Vector3d(low.x() + 0.25 * span.x(), low.y() - 0.1, low.z() + 0.45 * span.z()));
     const Eigen::Vector3d contact = mesh.V.row(tip).transpose();
     s.loads.push_back(force(2.0 * Eigen::Vector3d(0.0, 1.0, -0.3).normalized(), sphere(contact, 0.012)));
-    s.instruments.push_back({tip, contact + 0.2 * Eigen::Vector3d(0.3, -1.0, 0.5).normalized(), 5e-3});
+    s.instruments.push_back({tip, contact + 0.2 * Eigen::Vector3d(-0.3, -1.0, 0.5).normalized(), 5e-3});
   } else if (name == "breathing") {
     s.loads.push_back(force(4.0 * Eigen::Vector3d(0.0, -0.3, -1.0).normalized(),
                             box(Eigen::Vector3d(low.x() - 1e-3, low.y() - 1e-3, high.z() - 0.25 * span.z()), high.array() + 1e-3)));

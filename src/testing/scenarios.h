@@ -40,7 +40,7 @@ SyntheticCloud render_surface_cloud(const Eigen::VectorXd& x, const Eigen::Matri
 
 // The synthetic scenario of register_bench and the tests. A retractor lifting the liver:
 // `newtons` upward (+z), spread over the nodes of the mesh's underside (the lowest quarter in z)
-// in its last 40% along x (the phantom's right lobe).
+// in its first 40% along x (the phantom's right lobe: the patient's right is -x in LPS).
 LoadOptions underside_lift(const TetMesh& mesh, double newtons);
 // A camera 25 cm from the centroid of positions x, anterior-superior (-y, +z), looking at it.
 CameraView front_view(const Eigen::VectorXd& x);

@@ -24,6 +24,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <ctime>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
@@ -215,6 +216,11 @@ Stats stats(std::vector<double> v) {
   return s;
 }
 
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -244,7 +250,7 @@ int main(int argc, char** argv) {
            "tre_unregistered_mean_mm,tre_unregistered_max_mm,tre_mean_mm,tre_p95_mm,tre_max_mm,tumour_mean_mm,"
            "tumour_p95_mm,tumour_max_mm,bifurcation_mean_mm,bifurcation_p95_mm,bifurcation_max_mm,"
            "frame_median_ms,frame_max_ms,filter_ms,correspondence_ms,solve_ms,newton_per_frame,diverged,worst_target,"
-           "inside_95,radius_95_mean_mm,spring_energy_uj,analysis_ms,supports\n";
+           "inside_95,radius_95_mean_mm,spring_energy_uj,analysis_ms,supports,tissue_factor,frame_cpu_median_ms,analysis_cpu_ms\n";
     out << std::setprecision(6);
     if (!opt.targets_csv.empty()) {
       target_file.open(opt.targets_csv);
@@ -293,11 +299,11 @@ int main(int argc, char** argv) {
         for (double noise : opt.noise)
           for (double visible : opt.visible)
             for (double outliers : opt.outliers) {
-              std::vector<double> frame_ms, all, tumour, bifurcation, radius;
-              double inside = 0, energy = 0, analysis_ms = 0;
+              std::vector<double> frame_ms, frame_cpu_ms, all, tumour, bifurcation, radius;
+              double inside = 0, energy = 0, analysis_ms = 0, analysis_cpu_ms = 0;
               std::string held;
               double achieved = 0, returned = 0, filter_ms = 0, correspondence_ms = 0, solve_ms = 0, coverage = 0;
-              double outlier_share = 0;
+              double outlier_share = 0, tissue_factor = 0;
               int newton = 0, diverged = 0, cloud_points = 0;
               const int runs = opt.frames * opt.repeats;
               RegistrationFrame frame;
@@ -305,6 +311,7 @@ int main(int argc, char** argv) {
               double worst = -1;
               for (int r = 0; r < opt.repeats; ++r) {
                 model.reset();
+                model.set_stiffness_scale(1.0);
                 model.set_positions(preoperative);
                 SurfaceRegistration registration(model, model_scene.registration);
                 std::vector<TargetUncertainty::Covariance> covariance;
@@ -342,14 +349,20 @@ int main(int argc, char** argv) {
                     eye = view.eye;
                   }
                   cloud_points = static_cast<int>(cloud.size());
+                  // CPU time besides the wall clock: the cost on a core shared with other jobs.
+                  const std::clock_t c0 = std::clock();
                   frame = registration.register_cloud(cloud, eye);
+                  const std::clock_t c1 = std::clock();
+                  frame_cpu_ms.push_back(1e3 * (c1 - c0) / CLOCKS_PER_SEC);
                   // The analyses: which candidate supports to hold (every frame), the targets'
                   // covariances (at the last).
                   const auto t0 = std::chrono::steady_clock::now();
                   compliance.factorize();
                   if (k == opt.frames) covariance = uncertainty.covariances(compliance, registration.cloud_springs());
                   registration.estimate_supports(compliance);
+                  registration.estimate_tissue_stiffness(compliance);
                   analysis_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / runs;
+                  analysis_cpu_ms += 1e3 * (std::clock() - c1) / CLOCKS_PER_SEC / runs;
                   frame_ms.push_back(frame.total_ms);
                   newton += frame.newton_iterations;
                   filter_ms += frame.filter_ms / runs;
@@ -360,6 +373,7 @@ int main(int argc, char** argv) {
                 }
                 const std::vector<Eigen::Vector3d> registered = target_positions(model);
                 energy += spring_energy(model) / opt.repeats;
+                tissue_factor += model.stiffness_scale() / opt.repeats;
                 held.clear();
                 for (size_t c = 0; c < registration.supports_held().size(); ++c) {
                   std::ostringstream gain;
@@ -397,7 +411,7 @@ int main(int argc, char** argv) {
                   << 1e3 * t.mean << "," << 1e3 * t.p95 << "," << 1e3 * t.max << "," << 1e3 * b.mean << "," << 1e3 * b.p95
                   << "," << 1e3 * b.max << "," << sorted[sorted.size() / 2] << "," << sorted.back() << "," << filter_ms << ","
                   << correspondence_ms << "," << solve_ms << "," << static_cast<double>(newton) / runs << "," << diverged
-                  << "," << worst_target << "," << inside << "," << 1e3 * stats(radius).mean << "," << 1e6 * energy << "," << analysis_ms << "," << held << "\n"
+                  << "," << worst_target << "," << inside << "," << 1e3 * stats(radius).mean << "," << 1e6 * energy << "," << analysis_ms << "," << held << "," << tissue_factor << "," << median(frame_cpu_ms) << "," << analysis_cpu_ms << "\n"
                   << std::flush;
               if (!opt.quiet)
                 std::cerr << truth_name << " " << scenario_name << ": noise " << 1e3 * noise << " mm, visible " << achieved
