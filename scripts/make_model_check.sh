@@ -17,7 +17,7 @@ run() { set +e; "$MAKE_MODEL" "$@" >"$OUT/out.json" 2>"$OUT/err"; local s=$?; se
 help=$("$MAKE_MODEL" --help) || fail "--help exit status $?"
 for option in --surface --out --name --unit --input-frame --elements --size --feature-angle --max-deviation \
               --merge-distance --largest-shell --fixed --fixed-sphere --posture --vessels --wall-ratio \
-              --snap-tolerance --boundary-out --quiet; do
+              --snap-tolerance --boundary-out --time-limit --quiet; do
   grep -q -- "$option" <<<"$help" || fail "--help does not explain $option"
 done
 [ "$(run)" = 2 ] || fail "no arguments: expected exit 2"
@@ -38,10 +38,13 @@ printf 'solid one\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 100 0 0\
 [ "$(run --surface "$OUT/lps.stl" --unit m --out "$OUT/x" --quiet)" = 1 ] || fail "wrong unit: expected exit 1"
 grep -q "check --unit\|the unit is wrong" "$OUT/err" || fail "wrong unit: $(cat "$OUT/err")"
 
-common=(--elements 3000 --quiet)
+common=(--elements 2500 --quiet)
 [ "$(run --surface "$OUT/lps.stl" --out "$OUT/lps" "${common[@]}")" = 0 ] || fail "LPS run: $(cat "$OUT/err")"
 [ "$(run --surface "$OUT/ras.stl" --input-frame RAS --out "$OUT/ras" "${common[@]}")" = 0 ] || fail "RAS run: $(cat "$OUT/err")"
 cmp -s "$OUT/lps/liver.msh" "$OUT/ras/liver.msh" || fail "the RAS surface did not give the LPS mesh"
+# A run that cannot finish in its time limit ends with a message, not a hang.
+[ "$(run --surface "$OUT/lps.stl" --out "$OUT/slow" --elements 200000 --time-limit 1 --quiet)" = 1 ] || fail "time limit: expected exit 1"
+grep -q "time limit" "$OUT/err" || fail "time limit: $(cat "$OUT/err")"
 
 # Portal tree: the phantom's own file (metres, LPS) given in millimetres like the surface.
 awk 'BEGIN{p=0} /^POINTS/{p=$2; print; next} p>0{printf "%.9g %.9g %.9g\n", 1000*$1, 1000*$2, 1000*$3; p--; next}

@@ -4,6 +4,9 @@
 // node run. doc/patient_model.md explains the options; `make_model --help` lists them.
 // Progress goes to standard error, a JSON report to standard output. Exit status: 0 done, 1 bad
 // input (one line naming the file and the defect), 2 bad command line.
+#include <unistd.h>
+
+#include <csignal>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -67,6 +70,8 @@ const char* kUsage =
     "                        default 1 mm)\n"
     "  --boundary-out FILE   also write the model's boundary surface (format by extension) in the input's\n"
     "                        unit and frame, to overlay on the segmentation\n"
+    "  --time-limit S        wall time the run may take, in [1, 86400] s (default 600): past it make_model\n"
+    "                        stops with exit status 1 and says so (a mesher that does not finish)\n"
     "  --quiet               no progress on standard error\n"
     "  --help                this text\n"
     "Exit status: 0 done, 1 bad input (one line naming the file and the defect), 2 bad command line.\n";
@@ -93,6 +98,7 @@ struct Options {
   double wall_ratio = 0.1;
   double snap_tolerance = -1;  // input unit; < 0: 1 mm
   bool quiet = false;
+  double time_limit = 600;  // s
 };
 
 class CommandLineError : public std::runtime_error {
@@ -188,6 +194,8 @@ Options parse_args(int argc, char** argv) {
       o.snap_tolerance = parse_number(a, value(), 0, 1e9);
     } else if (a == "--boundary-out") {
       o.boundary_out = value();
+    } else if (a == "--time-limit") {
+      o.time_limit = parse_number(a, value(), 1, 86400);
     } else if (a == "--quiet") {
       o.quiet = true;
     } else {
@@ -400,6 +408,14 @@ int main(int argc, char** argv) {
     std::cerr << "make_model: " << e.what() << "\n" << kUsage;
     return 2;
   }
+  // A watchdog: gmsh has been seen to recurse without end on rare surfaces; the run then ends
+  // with a message instead of hanging its caller.
+  std::signal(SIGALRM, [](int) {
+    static const char text[] = "make_model: the time limit (--time-limit) ran out; the mesher did not finish\n";
+    [[maybe_unused]] const ssize_t n = write(STDERR_FILENO, text, sizeof(text) - 1);
+    _exit(1);
+  });
+  alarm(static_cast<unsigned>(std::ceil(options.time_limit)));
   try {
     return run(options);
   } catch (const CommandLineError& e) {
