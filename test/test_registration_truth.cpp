@@ -475,6 +475,18 @@ TEST(CandidateSupports, NoneToTryIsNoneHeld) {
   EXPECT_TRUE(registration.supports_held().empty());
 }
 
+// Twelve rounds of three registrations of `top` (seen from above) and one stiffness estimate.
+double estimate_over_rounds(SurfaceRegistration& registration, StateCompliance& compliance,
+                            const pcl::PointCloud<pcl::PointXYZ>& top) {
+  double factor = 1;
+  for (int round = 0; round < 12; ++round) {
+    for (int k = 0; k < 3; ++k) registration.register_cloud(top, Eigen::Vector3d(0.03, 0.01, 0.3));
+    compliance.factorize();
+    factor = registration.estimate_tissue_stiffness(compliance);
+  }
+  return factor;
+}
+
 TEST(TissueStiffness, AScaleActsAsEveryYoungsModulusScaled) {
   // The beam with its capsule, under gravity: the model at scale 2 against the scene whose
   // parenchyma and capsule moduli are doubled: forces, energy, tangent and damping at the same
@@ -531,12 +543,7 @@ TEST(TissueStiffness, TheCloudsCallForTheTruthsStiffness) {
     ASSERT_TRUE(model.step().converged());
     SurfaceRegistration registration(model, beam.model_scene.registration);
     StateCompliance compliance(model);
-    double factor = 1;
-    for (int round = 0; round < 12; ++round) {
-      for (int k = 0; k < 3; ++k) registration.register_cloud(top, Eigen::Vector3d(0.03, 0.01, 0.3));
-      compliance.factorize();
-      factor = registration.estimate_tissue_stiffness(compliance);
-    }
+    const double factor = estimate_over_rounds(registration, compliance, top);
     EXPECT_NEAR(std::log(factor), std::log(truth_factor), 1e-3) << "truth x" << truth_factor << ": estimated " << factor;
     EXPECT_EQ(model.stiffness_scale(), factor);
     registration.clear();
@@ -560,12 +567,7 @@ TEST(TissueStiffness, APatchTheModelCannotExplainDoesNotDecideIt) {
   ASSERT_TRUE(model.step().converged());
   SurfaceRegistration registration(model, beam.model_scene.registration);
   StateCompliance compliance(model);
-  double factor = 1;
-  for (int round = 0; round < 12; ++round) {
-    for (int k = 0; k < 3; ++k) registration.register_cloud(top, Eigen::Vector3d(0.03, 0.01, 0.3));
-    compliance.factorize();
-    factor = registration.estimate_tissue_stiffness(compliance);
-  }
+  const double factor = estimate_over_rounds(registration, compliance, top);
   EXPECT_NEAR(std::log(factor), std::log(2.0), 0.05) << "estimated " << factor;
 }
 
