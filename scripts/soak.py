@@ -60,11 +60,12 @@ SURFACE_Z = 0.039   # m, sagged surface of the phantom's right lobe under the pr
 RADIUS = 0.0025     # m, launch file's probe radius
 
 
-def marker_fields(raw):
-    """Stamp (s) and floating-point fields of a serialized visualization_msgs/Marker: pose and
-    scale, color, points, colors (read in place: the mesh has tens of thousands of points)."""
-    secs, nsecs = struct.unpack_from("<II", raw, 4)
-    o = 12
+def marker_fields(raw, o=0):
+    """Stamp (s), floating-point fields and end offset of a serialized visualization_msgs/Marker
+    starting at offset o: pose and scale, color, points, colors (read in place: the mesh has tens
+    of thousands of points)."""
+    secs, nsecs = struct.unpack_from("<II", raw, o + 4)
+    o += 12
     for _ in range(2):  # header.frame_id, ns
         o += 4 + struct.unpack_from("<I", raw, o)[0]
     o += 12  # id, type, action
@@ -76,7 +77,19 @@ def marker_fields(raw):
     o += 4 + 24 * n
     n = struct.unpack_from("<I", raw, o)[0]
     colors = np.frombuffer(raw, "<f4", 4 * n, o + 4)
-    return secs + 1e-9 * nsecs, (pose_scale, color, points, colors)
+    o += 4 + 16 * n
+    for _ in range(2):  # text, mesh_resource
+        o += 4 + struct.unpack_from("<I", raw, o)[0]
+    return secs + 1e-9 * nsecs, (pose_scale, color, points, colors), o + 1  # mesh_use_embedded_materials
+
+
+def marker_array_fields(raw):
+    """The floating-point fields of every marker of a serialized visualization_msgs/MarkerArray."""
+    fields, o = [], 4
+    for _ in range(struct.unpack_from("<I", raw, 0)[0]):
+        _, f, o = marker_fields(raw, o)
+        fields.extend(f)
+    return fields
 
 
 def node_pid():
@@ -102,8 +115,6 @@ class Soak:
     def __init__(self, duration, points, max_gap):
         self.duration = duration
         self.max_gap = max_gap
-        self.node_rate = rospy.get_param("liver_sim/rate", 30.0)
-        self.fault_every = rospy.get_param("liver_sim/test_fault_every", 0)
         self.lock = threading.Lock()
         self.sent = {"poses": 0, "nan_poses": 0, "absurd_poses": 0, "jumps": 0, "clouds": 0, "empty_clouds": 0,
                      "service_calls": 0, "refused_service_calls": 0, "resets": 0, "commands": 0, "huge_radii": 0}
@@ -122,8 +133,8 @@ class Soak:
         rospy.Subscriber("liver_sim/status", SimulationStatus, self.on_status, queue_size=100)
         rospy.Subscriber("liver_sim/wrench", WrenchStamped, self.on_wrench, queue_size=100)
         rospy.Subscriber("liver_sim/mesh", rospy.AnyMsg, self.on_mesh, queue_size=2)
-        for topic in ("liver_sim/instruments", "liver_sim/vessels"):
-            rospy.Subscriber(topic, rospy.AnyMsg, self.on_marker, callback_args=topic, queue_size=2)
+        rospy.Subscriber("liver_sim/vessels", rospy.AnyMsg, self.on_marker, callback_args="vessels", queue_size=2)
+        rospy.Subscriber("liver_sim/instruments", rospy.AnyMsg, self.on_marker, callback_args="instruments", queue_size=2)
 
     def on_status(self, m):
         with self.lock:
@@ -139,14 +150,17 @@ class Soak:
                 self.non_finite.add("wrench")
 
     def on_marker(self, m, topic):
-        _, fields = marker_fields(m._buff)
+        try:
+            fields = marker_array_fields(m._buff) if topic == "instruments" else marker_fields(m._buff)[1]
+        except (struct.error, ValueError):  # a message this check cannot read fails it
+            fields = [np.array([np.nan])]
         if not all(np.isfinite(f).all() for f in fields):
             with self.lock:
-                self.non_finite.add(topic.split("/")[-1])
+                self.non_finite.add(topic)
 
     def on_mesh(self, m):
         now = rospy.Time.now().to_sec()
-        stamp, fields = marker_fields(m._buff)
+        stamp, fields, _ = marker_fields(m._buff)
         with self.lock:
             self.meshes += 1
             if stamp > 0:
@@ -216,6 +230,8 @@ class Soak:
 
     def run(self):
         rospy.wait_for_service("liver_sim/set_capsule", 60)
+        self.node_rate = rospy.get_param("liver_sim/rate", 30.0)  # read once the node runs
+        self.fault_every = rospy.get_param("liver_sim/test_fault_every", 0)
         pid = node_pid()
         if pid is None:
             raise RuntimeError("no liver_sim_node process")
@@ -254,7 +270,8 @@ class Soak:
             gaps = [b[0] - a[0] for a, b in zip(window, window[1:])]
             # Steps whose status never came: the counter advanced by more than one (a reset
             # starts it again at 1; an idle node repeats its last step).
-            skipped = sum(b.step - a.step - 1 for (_, a), (_, b) in zip(window, window[1:])
+            skipped = sum(b.step - a.step - 1 if b.step > a.step else b.step - 1
+                          for (_, a), (_, b) in zip(window, window[1:])
                           if b.step > a.step + 1 or (b.step < a.step and b.step > 1))
             faulted = [i for i, (_, m) in enumerate(window) if m.state == "fault"]
             steps_after_fault = sum(1 for _, m in window[faulted[-1] + 1:] if m.state != "fault") if faulted else 0

@@ -8,8 +8,7 @@
 source "$(dirname "$0")/ros_env.sh" 11497
 roscore -p 11497 >/dev/null 2>&1 & MASTER=$!
 sleep 3
-rosparam set /liver_sim/test_fault_every 40  # faults injected into every 40th frame (the node's test hook)
-taskset -c 0 roslaunch -p 11497 liver_sim liver_sim.launch >"$REPO/build/soak_node.log" 2>&1 & NODE=$!
+taskset -c 0 roslaunch -p 11497 liver_sim liver_sim.launch test_fault_every:=40 >"$REPO/build/soak_node.log" 2>&1 & NODE=$!
 LOAD=""
 if [ "${2:-0}" -gt 0 ]; then
   taskset -c 0,1 stress-ng --cpu "$2" --quiet & LOAD=$!
