@@ -39,6 +39,32 @@ TEST(SurfaceLocator, FindsTheClosestTriangleExactly) {
   }
 }
 
+TEST(SurfaceLocator, ACutoffKeepsTheSearchExactWithinIt) {
+  // A large triangle (1 m) at z = 0 and, 4 mm above its corner, twenty small ones (1 mm): a
+  // point 1 mm above the corner is nearest the large triangle, whose centroid is 0.3 m away,
+  // behind the small ones'. Within the cutoff the hit must be exact; beyond it, it only has to
+  // lie beyond it. Killed by a search bound without the triangles' reach (tried).
+  std::vector<Eigen::Vector3d> nodes = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  std::vector<Eigen::Vector3i> triangles = {{0, 1, 2}};
+  for (int k = 0; k < 20; ++k) {
+    const Eigen::Vector3d o(0.01 + 0.002 * (k % 5), 0.01 + 0.002 * (k / 5), 0.004);
+    const int first = static_cast<int>(nodes.size());
+    nodes.insert(nodes.end(), {o, o + Eigen::Vector3d(1e-3, 0, 0), o + Eigen::Vector3d(0, 1e-3, 0)});
+    triangles.emplace_back(first, first + 1, first + 2);
+  }
+  Eigen::VectorXd x(3 * nodes.size());
+  for (size_t i = 0; i < nodes.size(); ++i) x.segment<3>(3 * i) = nodes[i];
+  Eigen::MatrixX3i F(triangles.size(), 3);
+  for (size_t t = 0; t < triangles.size(); ++t) F.row(t) = triangles[t].transpose();
+  SurfaceLocator locator;
+  locator.build(x, F);
+  const SurfaceLocator::Hit near = locator.closest(Eigen::Vector3d(0.015, 0.015, 0.001), nullptr, 0.005);
+  EXPECT_EQ(near.triangle, 0);
+  EXPECT_NEAR(near.distance, 0.001, 1e-12);
+  const SurfaceLocator::Hit far = locator.closest(Eigen::Vector3d(0.015, 0.015, -0.02), nullptr, 0.005);
+  EXPECT_GT(far.distance, 0.005);
+}
+
 // A block fixed at its base, one spring pulling a top-face point up.
 struct SpringBlock {
   Scene scene;
@@ -244,6 +270,32 @@ TEST(PhantomRegistration, UndeformedCloudChangesNothing) {
   f = q.run(q.scene.registration, 0.0, 0.0, 2);
   EXPECT_LT(f.rms, 50e-6);
   EXPECT_LT(q.tre().second, 50e-6);
+}
+
+TEST(PhantomRegistration, UpdatesSpreadOverFramesAreTheUpdatesOfOneFrame) {
+  // A cloud's three correspondence updates, one per call (registration.frame_updates 1: the
+  // cloud's own frame, then two refine() calls), are the same computation as all three in its
+  // frame; later refine() calls only solve (the springs stay). Killed by a refine() that only
+  // solves (tried).
+  Phantom all(5.0), spread(5.0);
+  RegistrationOptions o = all.scene.registration;
+  ASSERT_EQ(o.correspondence_updates, 3);
+  SurfaceRegistration one_frame(*all.model, o);
+  o.frame_updates = 1;
+  SurfaceRegistration per_frame(*spread.model, o);
+  const CameraView v = all.view(1e-3, 0.0, 10);
+  const pcl::PointCloud<pcl::PointXYZ> cloud = render_surface_cloud(all.truth->positions(), all.model->boundary(), v).cloud;
+  const RegistrationFrame f = one_frame.register_cloud(cloud, v.eye);
+  RegistrationFrame g = per_frame.register_cloud(cloud, v.eye);
+  EXPECT_GT((all.model->positions() - spread.model->positions()).norm(), 1e-6);  // one update fewer so far
+  for (int k = 0; k < 2; ++k) g = per_frame.refine();
+  EXPECT_EQ(g.correspondences, f.correspondences);
+  EXPECT_EQ(g.coverage, f.coverage);
+  EXPECT_EQ(all.model->positions(), spread.model->positions());
+  const std::vector<SurfaceTarget> springs = per_frame.cloud_springs();
+  per_frame.refine();
+  ASSERT_EQ(per_frame.cloud_springs().size(), springs.size());
+  for (size_t i = 0; i < springs.size(); ++i) EXPECT_EQ(per_frame.cloud_springs()[i].point, springs[i].point);
 }
 
 TEST(PhantomRegistration, RecoversALiftFromNoisyPartialClouds) {

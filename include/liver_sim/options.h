@@ -180,6 +180,8 @@ struct RegistrationOptions {
   double trim_fraction = 0.1;      // -, in [0, 0.9): the farthest fraction of the rest is dropped too
   double huber_width = 2e-3;       // m: beyond this distance a point's weight falls as width/distance
   int correspondence_updates = 3;  // closest points recomputed and solved this many times per cloud, in [1, 100]
+  int frame_updates = 100;         // of those, per call of register_cloud or refine (a frame), in [1, 100]: the
+                                   // cloud's first ones in its own frame, the rest in the next refine() calls
   int newton_iterations = 1;       // per update (a real-time frame: the next cloud continues), in [1, 100]
   SolverOptions::Strategy strategy = SolverOptions::Strategy::ModifiedNewton;  // of those iterations
   bool rigid_alignment = false;    // PCL ICP of the first cloud to the surface, applied to all clouds

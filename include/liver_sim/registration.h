@@ -17,7 +17,9 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <chrono>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -57,8 +59,11 @@ class SurfaceLocator {
   // Exact: the triangles of the nearest centroids are tested; when a triangle farther out could
   // still be closer (its centroid within the best distance plus the largest centroid-to-vertex
   // distance), every triangle within that radius is. Safe to call from several threads.
-  // With `candidates`, also returns the triangles tested (indices of this locator).
-  Hit closest(const Eigen::Vector3d& p, std::vector<int>* candidates = nullptr) const;
+  // With `candidates`, also returns the triangles tested (indices of this locator). With a
+  // `cutoff` (m), exact only for a point within it of the surface: a farther point's hit is
+  // some triangle farther than the cutoff (a gate then drops it without a wide search).
+  Hit closest(const Eigen::Vector3d& p, std::vector<int>* candidates = nullptr,
+              double cutoff = std::numeric_limits<double>::infinity()) const;
   // The best of earlier candidates, at the positions of the last refresh (no tree search).
   Hit closest_among(const Eigen::Vector3d& p, const std::vector<int>& candidates) const;
   // The same triangles at new positions x (the tree keeps the old centroids: use closest_among).
@@ -123,10 +128,12 @@ class SurfaceRegistration {
   RegistrationFrame register_cloud(const pcl::PointCloud<pcl::PointXYZ>& cloud,
                                    const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
 
-  // One more solve with the last cloud's springs and the registration's solver settings: the
-  // node converges the model on the last cloud between clouds, in steps short enough that the
-  // next cloud waits for one iteration. (The springs stay put: correspondences that switch
-  // triangles would keep the residual from reaching the tolerance.)
+  // The last cloud's next correspondence updates (up to options.frame_updates of those its
+  // register_cloud left), or, once all are done, one more solve with its springs; with the
+  // registration's solver settings. The node converges the model on the last cloud between
+  // clouds, in steps short enough that the next cloud waits for one iteration. (After the
+  // updates the springs stay put: correspondences that switch triangles would keep the residual
+  // from reaching the tolerance.)
   RegistrationFrame refine();
 
   // The next cloud is rigidly aligned first (ICP from the current alignment), whatever
@@ -196,6 +203,9 @@ class SurfaceRegistration {
   double all_points_rms();
   // One model step with the registration's strategy and iteration cap; adds to the frame.
   void solve(RegistrationFrame& frame);
+  // Up to `count` more correspondence updates of the current cloud (of options.
+  // correspondence_updates), each followed by a solve.
+  void continue_updates(int count, RegistrationFrame& frame);
 
   LiverModel& model_;
   RegistrationOptions options_;
@@ -210,6 +220,8 @@ class SurfaceRegistration {
   std::vector<std::pair<double, int>> ranked_;
   std::vector<char> covered_;  // per boundary triangle: holds an accepted point
   RegistrationFrame last_;     // of the last registered cloud (refine reports its support)
+  int updates_left_ = 0;       // correspondence updates of the current cloud not yet done
+  std::chrono::steady_clock::time_point frame_start_;  // of the register_cloud or refine call in progress
   std::vector<SurfaceTarget> cloud_springs_;
   struct Candidate {
     std::vector<SurfaceTarget> springs;  // point-to-point, each surface node to its rest position

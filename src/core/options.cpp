@@ -165,6 +165,7 @@ std::string validate(const RegistrationOptions& o) {
            : message("registration.trim_fraction", "in [0, 0.9)", o.trim_fraction),
        positive("registration.huber_width", o.huber_width),
        count_within("registration.correspondence_updates", o.correspondence_updates, 1, 100, "in [1, 100]"),
+       count_within("registration.frame_updates", o.frame_updates, 1, 100, "in [1, 100]"),
        count_within("registration.newton_iterations", o.newton_iterations, 1, 100, "in [1, 100]"),
        o.min_points >= 1 ? "" : message("registration.min_points", ">= 1", o.min_points),
        o.min_coverage >= 0 && o.min_coverage <= 1 ? "" : message("registration.min_coverage", "in [0, 1]", o.min_coverage),

@@ -85,7 +85,7 @@ SurfaceLocator::Hit SurfaceLocator::closest_among(const Eigen::Vector3d& p, cons
   return best;
 }
 
-SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, std::vector<int>* candidates) const {
+SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, std::vector<int>* candidates, double cutoff) const {
   std::vector<int> found;
   std::vector<float> squared;
   if (triangles_.empty()) return closest_among(p, found);
@@ -93,8 +93,9 @@ SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, std::vecto
   constexpr int kNearest = 8;
   const int n = tree_.nearestKSearch(q, kNearest, found, squared);
   Hit best = closest_among(p, found);
-  // Float centroids: a little slack keeps the bound safe.
-  const double bound = best.distance + reach_ + 1e-6;
+  // Float centroids: a little slack keeps the bound safe. A triangle nearer than the cutoff has
+  // its centroid within cutoff + reach: none farther needs testing.
+  const double bound = std::min(best.distance, cutoff) + reach_ + 1e-6;
   if (n == kNearest && std::sqrt(squared.back()) < bound) {
     tree_.radiusSearch(q, bound, found, squared);
     best = closest_among(p, found);
@@ -243,6 +244,7 @@ void SurfaceRegistration::clear() {
   held_.assign(supports_.size(), false);
   gains_.assign(supports_.size(), 0.0);
   last_ = RegistrationFrame();
+  updates_left_ = 0;
   alignment_ = Eigen::Isometry3d::Identity();
   aligned_ = false;
   points_->clear();
@@ -355,7 +357,8 @@ int SurfaceRegistration::find_correspondences(bool search, const std::optional<E
   for (int i = 0; i < n; ++i) {
     const pcl::PointXYZ& q = (*points_)[i];
     const Eigen::Vector3d p(q.x, q.y, q.z);
-    hits_[i] = search ? locator_.closest(p, &candidates_[i]) : locator_.closest_among(p, candidates_[i]);
+    hits_[i] = search ? locator_.closest(p, &candidates_[i], options_.max_distance)
+                      : locator_.closest_among(p, candidates_[i]);
   }
   ranked_.clear();
   for (int i = 0; i < n; ++i)
@@ -434,7 +437,7 @@ double SurfaceRegistration::spring_rms() const {
 
 RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl::PointXYZ>& cloud,
                                                       const std::optional<Eigen::Vector3d>& viewpoint) {
-  const auto t_frame = Clock::now();
+  const auto t_frame = frame_start_ = Clock::now();
   RegistrationFrame frame;
   if (viewpoint && !viewpoint->allFinite()) throw std::invalid_argument("the viewpoint is not finite");
   // The points of the previous frame stay in use if this cloud is refused (swapped, not copied).
@@ -459,28 +462,22 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   frame.used_points = static_cast<int>(points_->size());
   frame.filter_ms = ms_since(t_frame);
   const std::optional<Eigen::Vector3d> eye = viewpoint ? std::optional<Eigen::Vector3d>(alignment_ * *viewpoint) : viewpoint;
-  for (int u = 0; u < options_.correspondence_updates; ++u) {
-    const auto t0 = Clock::now();
-    const RegistrationFrame applied = frame;
-    const int found = find_correspondences(u == 0, eye, frame);
-    frame.correspondence_ms += ms_since(t0);
-    if (found == 0 && u == 0)
-      refuse(locator_.empty() ? "no surface triangle faces the viewpoint (a sensor inside the liver?)"
-                              : "no point of the cloud lies within max_distance of the surface");
-    const std::string why = unsupported(found, frame.coverage);
-    if (!why.empty() && u == 0) refuse(why);
-    if (!why.empty()) {  // the surface moved away from the points: the last springs stay
-      frame.coverage = applied.coverage;
-      frame.inlier_fraction = applied.inlier_fraction;
-      frame.stiffness_scale = applied.stiffness_scale;
-      break;
-    }
-    frame.correspondences = found;
-    cloud_springs_.swap(targets_);  // targets_ is refilled at the next update
-    apply_springs();
-    solve(frame);
-    if (frame.step.status == StepResult::Status::Diverged) break;
-  }
+  // A refused cloud leaves the previous one without further updates: the search state is this one's.
+  updates_left_ = 0;
+  const auto t0 = Clock::now();
+  const int found = find_correspondences(true, eye, frame);
+  frame.correspondence_ms += ms_since(t0);
+  if (found == 0)
+    refuse(locator_.empty() ? "no surface triangle faces the viewpoint (a sensor inside the liver?)"
+                            : "no point of the cloud lies within max_distance of the surface");
+  const std::string why = unsupported(found, frame.coverage);
+  if (!why.empty()) refuse(why);
+  frame.correspondences = found;
+  cloud_springs_.swap(targets_);  // targets_ is refilled at the next update
+  apply_springs();
+  solve(frame);
+  if (frame.step.status != StepResult::Status::Diverged) updates_left_ = options_.correspondence_updates - 1;
+  continue_updates(options_.frame_updates - 1, frame);
   frame.rms = spring_rms();
   frame.rms_all = all_points_rms();
   frame.total_ms = ms_since(t_frame);
@@ -494,6 +491,9 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
   SolverOptions frame_solver = scene_solver;
   frame_solver.strategy = options_.strategy;
   frame_solver.max_iterations = options_.newton_iterations;
+  // The scene's time budget is the frame's: the search and the solves before took their share.
+  auto budget_left = [&] { return std::max(scene_solver.time_budget - ms_since(frame_start_) / 1000, 1e-6); };
+  frame_solver.time_budget = budget_left();
   model_.set_solver_options(frame_solver);  // valid: the scene's with validated values
   // The scene's options again however the solve ends (a step may throw: the model is rolled
   // back and the exception goes on to the caller).
@@ -509,6 +509,8 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
     frame.newton_iterations += frame.step.iterations;
     frame.factorizations += frame.step.factorizations;
     model_.refactorize();
+    frame_solver.time_budget = budget_left();
+    model_.set_solver_options(frame_solver);
     frame.step = model_.step();
   }
   frame.solve_ms += ms_since(t0);
@@ -516,8 +518,29 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
   frame.factorizations += frame.step.factorizations;
 }
 
+void SurfaceRegistration::continue_updates(int count, RegistrationFrame& frame) {
+  for (; count > 0 && updates_left_ > 0; --count) {
+    const auto t0 = Clock::now();
+    const RegistrationFrame applied = frame;
+    const int found = find_correspondences(false, std::nullopt, frame);
+    frame.correspondence_ms += ms_since(t0);
+    if (!unsupported(found, frame.coverage).empty()) {  // the surface moved away from the points: the last springs stay
+      frame.coverage = applied.coverage;
+      frame.inlier_fraction = applied.inlier_fraction;
+      frame.stiffness_scale = applied.stiffness_scale;
+      updates_left_ = 0;
+      return;
+    }
+    frame.correspondences = found;
+    cloud_springs_.swap(targets_);
+    apply_springs();
+    solve(frame);
+    updates_left_ = frame.step.status == StepResult::Status::Diverged ? 0 : updates_left_ - 1;
+  }
+}
+
 RegistrationFrame SurfaceRegistration::refine() {
-  const auto t_frame = Clock::now();
+  const auto t_frame = frame_start_ = Clock::now();
   RegistrationFrame frame;
   frame.input_points = last_.input_points;
   frame.used_points = static_cast<int>(points_->size());
@@ -525,7 +548,15 @@ RegistrationFrame SurfaceRegistration::refine() {
   frame.inlier_fraction = last_.inlier_fraction;
   frame.coverage = last_.coverage;
   frame.stiffness_scale = last_.stiffness_scale;
-  solve(frame);
+  if (updates_left_ > 0) {
+    continue_updates(options_.frame_updates, frame);
+    last_.correspondences = frame.correspondences;
+    last_.coverage = frame.coverage;
+    last_.inlier_fraction = frame.inlier_fraction;
+    last_.stiffness_scale = frame.stiffness_scale;
+  } else {
+    solve(frame);
+  }
   frame.rms = spring_rms();
   frame.rms_all = all_points_rms();
   frame.total_ms = ms_since(t_frame);

@@ -207,7 +207,7 @@ class Reader {
 
   void read_registration(const YAML::Node& g, RegistrationOptions& o) const {
     check_keys(g, "registration", {"stiffness", "metric", "voxel_size", "max_points", "max_distance", "trim_fraction",
-                                   "huber_width", "correspondence_updates", "newton_iterations", "strategy",
+                                   "huber_width", "correspondence_updates", "frame_updates", "newton_iterations", "strategy",
                                    "rigid_alignment", "min_points", "min_coverage", "full_coverage",
                                    "candidate_supports", "support_stiffness", "support_gain", "max_tissue_stiffness_factor",
                                    "uncertainty"});
@@ -225,6 +225,7 @@ class Reader {
     if (g["huber_width"]) o.huber_width = number(g["huber_width"], "registration.huber_width");
     if (g["correspondence_updates"])
       o.correspondence_updates = integer(g["correspondence_updates"], "registration.correspondence_updates");
+    if (g["frame_updates"]) o.frame_updates = integer(g["frame_updates"], "registration.frame_updates");
     if (g["rigid_alignment"]) o.rigid_alignment = boolean(g["rigid_alignment"], "registration.rigid_alignment");
     if (g["min_points"]) o.min_points = integer(g["min_points"], "registration.min_points");
     if (g["min_coverage"]) o.min_coverage = number(g["min_coverage"], "registration.min_coverage");
