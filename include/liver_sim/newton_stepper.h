@@ -167,6 +167,7 @@ class NewtonStepper {
   long factorizations_ = 0;  // CHOLMOD factorisations since construction
   InjectedFault fault_ = InjectedFault::None;
   std::chrono::steady_clock::time_point deadline_;  // of the step in progress (time_budget)
+  std::chrono::steady_clock::duration factorization_time_{};  // of the last CHOLMOD factorisation
 
   MechanicalModel& mechanics_;
   InstrumentContact& contact_;

@@ -413,6 +413,7 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
             break;
           }
       const bool factored = cholmod_.factorize(system_);
+      factorization_time_ = Clock::now() - t0;
       ++factorizations_;
       result.timing.factorization_ms += ms_since(t0);
       ++result.factorizations;
@@ -529,14 +530,22 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     // potential test in the last iteration allowed, which would end the step above where it
     // started and roll it back as stalled): the factor no longer fits the state. Refactorise
     // at x (evaluated again: the tangent is assembled where the last evaluation was) and redo
-    // the iteration, once per Newton solve (per instrument stage), instead of spending it.
+    // the iteration, once per Newton solve (per instrument stage), instead of spending it. When
+    // the factorisation would overrun the time budget, the frame ends where the iteration
+    // started, and the next one starts with the factorisation.
     const bool last_iteration = result.iterations - iterations_before == solver_.max_iterations;
     if (strategy == Strategy::ModifiedNewton && !fresh_factor && !refreshed && best_merit >= current_merit &&
         (!accepted || last_iteration)) {
-      refreshed = true;
       factor_valid_ = false;
-      --result.iterations;
       if (contact_update) contact_.scale_update(0.0);
+      if (Clock::now() + factorization_time_ > deadline_) {
+        result.out_of_time = true;
+        result.message = "time budget";
+        norm = residual(x_, r_, &reference);  // the evaluation is the trial's
+        break;
+      }
+      refreshed = true;
+      --result.iterations;
       norm = residual(x_, r_, &reference);
       continue;
     }
