@@ -90,11 +90,13 @@ class LiverSimNode {
     // ~parenchyma/*, ~capsule/*, ~solver/*, ~contact/*, ~registration/* override the scalars of the
     // scene file; ~threads is solver.threads. The node steps in real-time frames by default: modified Newton on a reused
     // factor (contacts carried in the same solve), two iterations a frame, a step that has not
-    // converged continuing in the next frame; ~solver/strategy and ~solver/max_iterations change that.
+    // converged continuing in the next frame, a cloud's correspondence updates one a frame;
+    // ~solver/strategy, ~solver/max_iterations and ~registration/frame_updates change that.
     std::ostringstream budget;
     budget.precision(17);
     budget << "solver.time_budget=" << step_time_budget;
-    std::vector<std::string> overrides = {"solver.strategy=modified_newton", "solver.max_iterations=2", budget.str()};
+    std::vector<std::string> overrides = {"solver.strategy=modified_newton", "solver.max_iterations=2", budget.str(),
+                                          "registration.frame_updates=1"};
     for (const char* section : {"parenchyma", "capsule", "solver", "contact", "registration"}) {
       XmlRpc::XmlRpcValue values;
       if (!pnh.getParam(section, values)) continue;
@@ -173,6 +175,7 @@ class LiverSimNode {
       std::lock_guard<std::mutex> lock(mutex_);
       pending_config_ = c;
     });
+    heartbeat_ = nh.createWallTimer(ros::WallDuration(0.005), &LiverSimNode::on_heartbeat, this);
   }
 
   // ~parent_frame and ~parent_transform put the model frame in the OR's tf tree (a static
@@ -210,7 +213,15 @@ class LiverSimNode {
       // diagnostics) is counted, and the loop goes on.
       try {
         must_step |= guarded_inputs(loop);
+        {
+          std::lock_guard<std::mutex> lock(status_mutex_);
+          frame_start_ = ros::WallTime::now();
+        }
         must_step = simulate_frame(must_step);
+        {
+          std::lock_guard<std::mutex> lock(status_mutex_);
+          frame_start_ = ros::WallTime();
+        }
         const ros::WallTime now = ros::WallTime::now();
         if (now >= next_publish) {
           const ros::WallDuration publish_period(1.0 / publish_rate_);
@@ -324,6 +335,7 @@ class LiverSimNode {
       registered_ = RegistrationFrame();
       covariances_.clear();
       analysis_due_ = false;
+      analysis_springs_.reset();
       steps_ = 0;
       reflected_stamp_ = ros::Time();
     }
@@ -502,17 +514,30 @@ class LiverSimNode {
 
   // At most once per ~uncertainty_period, after a cloud was registered: the targets'
   // covariances and the candidate supports the clouds call for (one factorisation of the
-  // registered model's stiffness serves both). (simulation thread)
+  // registered model's stiffness serves both). The factorisation and the solves take a frame
+  // each, so that neither frame carries both. (simulation thread)
   void analyse_registration(bool registered) {
     analysis_due_ |= registered;
+    if (analysis_springs_) return analyse_factorised();
     const ros::WallTime now = ros::WallTime::now();
     if (!analysis_due_ || now < next_analysis_) return;
     next_analysis_ = now + ros::WallDuration(uncertainty_period_);
     analysis_due_ = false;
     try {
       compliance_->factorize();
+      analysis_springs_ = registration_->cloud_springs();  // those in the factor
+    } catch (const std::runtime_error& e) {
+      ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", e.what());
+    }
+  }
+
+  // The analysis's second frame: the solves on the factor of the frame before.
+  void analyse_factorised() {
+    const std::vector<SurfaceTarget> springs = std::move(*analysis_springs_);
+    analysis_springs_.reset();
+    try {
       covariances_.clear();
-      for (const TargetUncertainty::Covariance& c : uncertainty_->covariances(*compliance_, registration_->cloud_springs()))
+      for (const TargetUncertainty::Covariance& c : uncertainty_->covariances(*compliance_, springs))
         covariances_.push_back(c.total);
       display_due_ = true;
       analysis_stamp_ = ros::Time::now();
@@ -607,8 +632,36 @@ class LiverSimNode {
       s.text = r.message.empty() ? fresh_text_ : fresh_text_.empty() ? r.message : r.message + "; " + fresh_text_;
       fresh_text_.clear();
     }
-    status_pub_.publish(s);
+    {
+      // Published under the heartbeat's lock: it never sends an older step after a newer one.
+      std::lock_guard<std::mutex> lock(status_mutex_);
+      status_pub_.publish(s);
+      last_status_ = s;
+      last_status_time_ = ros::WallTime::now();
+      frame_period_ = 1.0 / rate_;
+    }
     instruments_->publish(*model_, s.header);
+  }
+
+  // While a frame runs longer than one frame (a factorisation, a cloud's analysis), ~status
+  // keeps its rate: the last step's status again, state "busy", so that a guidance stack
+  // watching it sees a live node whose mesh is its last good state. (timer, beside the loop)
+  void on_heartbeat(const ros::WallTimerEvent&) {
+    std::lock_guard<std::mutex> lock(status_mutex_);
+    const ros::WallTime now = ros::WallTime::now();
+    const ros::WallDuration period(frame_period_);
+    if (frame_start_.isZero() || last_status_time_.isZero() || now - frame_start_ < period ||
+        now - last_status_time_ < period)
+      return;
+    SimulationStatus s = last_status_;
+    s.header.stamp = ros::Time::now();
+    s.state = "busy";
+    std::ostringstream text;
+    text << "a frame in progress for " << static_cast<int>((now - frame_start_).toSec() * 1000)
+         << " ms; the mesh is the last step's";
+    s.text = text.str();
+    status_pub_.publish(s);
+    last_status_time_ = now;
   }
 
   // The surface, targets and vessels, when the shape, the display settings or the targets'
@@ -784,8 +837,16 @@ class LiverSimNode {
   RegistrationFrame registered_;  // the last registered cloud's frame
   std::vector<Eigen::Matrix3d> covariances_;  // of the targets, m^2, at the last analysis
   bool analysis_due_ = false;
+  std::optional<std::vector<SurfaceTarget>> analysis_springs_;  // set: an analysis's factor awaits its solves
   ros::WallTime next_analysis_;
   ros::Time analysis_stamp_;
+
+  // Shared with the heartbeat, under status_mutex_.
+  std::mutex status_mutex_;
+  ros::WallTimer heartbeat_;
+  SimulationStatus last_status_;  // as last published by the loop
+  ros::WallTime last_status_time_, frame_start_;  // frame_start_: zero between frames
+  double frame_period_ = 1.0 / 30;  // s, at the last status
 
   // Shared with callbacks, under mutex_.
   std::mutex mutex_;
