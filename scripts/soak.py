@@ -10,7 +10,9 @@ jumps 3 cm across the lobe and back (the step stages the move). With the node's 
 (exceptions, allocation failures, NaN, negative pivots): each must be rolled back and counted.
 
 Reports: messages sent and handled, RSS of the node at start (after a warm-up) and end, status
-messages and the largest gap between them, the node's simulation frames against the frames its
+messages and the largest gap between them (heartbeats included: state "busy", sent while a frame
+runs longer than one frame), the longest frame (the largest gap between the loop's own statuses),
+the node's simulation frames against the frames its
 rate asks for (dropped frames), pose-to-mesh latency early and late (a growing queue would make
 it grow), refused inputs. Every floating-point field of every message the node publishes on
 ~status, ~wrench, ~mesh, ~instruments and ~vessels is checked for NaN and infinity.
@@ -268,6 +270,10 @@ class Soak:
         with self.lock:
             window = [(t, m) for t, m in self.status if t_start <= t <= t_end]
             gaps = [b[0] - a[0] for a, b in zip(window, window[1:])]
+            # Between the loop's own statuses, heartbeats ("busy") left out: the longest frame.
+            own = [t for t, m in window if m.state != "busy"]
+            frame_gaps = [b - a for a, b in zip(own, own[1:])]
+            busy = sum(1 for _, m in window if m.state == "busy")
             # Steps whose status never came: the counter advanced by more than one (a reset
             # starts it again at 1; an idle node repeats its last step).
             skipped = sum(b.step - a.step - 1 if b.step > a.step else b.step - 1
@@ -293,6 +299,9 @@ class Soak:
             "rss_mb": {"start": round(rss_start, 1), "end": round(rss_end, 1)},
             "status_messages": len(window),
             "status_max_gap_s": round(max(gaps), 3) if gaps else None,
+            "status_gaps_over_two_frames": sum(1 for g in gaps if g > 2.0 / self.node_rate),
+            "status_busy": busy,
+            "longest_frame_s": round(max(frame_gaps), 3) if frame_gaps else None,
             "status_steps_skipped": skipped,
             "mesh_markers": len(lat),
             "latency_s": {"early_median": round(float(np.median(early)), 3) if early else None,

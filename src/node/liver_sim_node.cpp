@@ -8,6 +8,7 @@
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 #include <pcl_conversions/pcl_conversions.h>
+#include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <std_srvs/Trigger.h>
@@ -175,7 +176,16 @@ class LiverSimNode {
       std::lock_guard<std::mutex> lock(mutex_);
       pending_config_ = c;
     });
-    heartbeat_ = nh.createWallTimer(ros::WallDuration(0.005), &LiverSimNode::on_heartbeat, this);
+    // The heartbeat has a queue and a thread of its own: message callbacks never delay it.
+    ros::NodeHandle heartbeat_nh(nh);
+    heartbeat_nh.setCallbackQueue(&heartbeat_queue_);
+    heartbeat_ = heartbeat_nh.createWallTimer(ros::WallDuration(0.005), &LiverSimNode::on_heartbeat, this);
+  }
+
+  // Called from the thread that starts the callbacks' spinner (its processors and priority).
+  void start_heartbeat() {
+    heartbeat_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &heartbeat_queue_);
+    heartbeat_spinner_->start();
   }
 
   // ~parent_frame and ~parent_transform put the model frame in the OR's tf tree (a static
@@ -843,7 +853,6 @@ class LiverSimNode {
 
   // Shared with the heartbeat, under status_mutex_.
   std::mutex status_mutex_;
-  ros::WallTimer heartbeat_;
   SimulationStatus last_status_;  // as last published by the loop
   ros::WallTime last_status_time_, frame_start_;  // frame_start_: zero between frames
   double frame_period_ = 1.0 / 30;  // s, at the last status
@@ -865,6 +874,11 @@ class LiverSimNode {
   uint32_t rejected_ = 0;
   uint64_t clouds_ = 0;
   std::string last_rejection_, fresh_text_;
+
+  // Last: the heartbeat's thread stops before anything it reads goes.
+  ros::CallbackQueue heartbeat_queue_;
+  ros::WallTimer heartbeat_;
+  std::unique_ptr<ros::AsyncSpinner> heartbeat_spinner_;
 };
 
 }  // namespace liver_sim
@@ -916,6 +930,7 @@ int main(int argc, char** argv) {
     liver_sim::set_realtime_priority(0);
     liver_sim::pin_calling_thread(others.empty() ? processors : others);
     spinner.start();
+    node->start_heartbeat();
   }).join();
   node->run();
   return 0;
