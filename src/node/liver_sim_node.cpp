@@ -277,9 +277,11 @@ class LiverSimNode {
   bool simulate_frame(bool must_step) {
     bool stepped = false;
     const StepResult r = guard_.step(*model_, [&] {
-      std::optional<RegistrationFrame> registered = register_pending_cloud();
-      if (registered) registering_ = true;
-      analyse_registration(registered.has_value());
+      // A frame with a part of the registration's analysis leaves the pending cloud to the next
+      // frame (a newer one may replace it): the two do not share a frame.
+      std::optional<RegistrationFrame> registered;
+      if (!analyse_registration()) registered = register_pending_cloud();
+      if (registered) registering_ = analysis_due_ = true;
       stepped = registered || must_step;
       // While clouds come, the model converges on the last one in the registration's short
       // steps, so that the next cloud waits for one iteration, not a full solve.
@@ -525,12 +527,15 @@ class LiverSimNode {
   // At most once per ~uncertainty_period, after a cloud was registered: the targets'
   // covariances and the candidate supports the clouds call for (one factorisation of the
   // registered model's stiffness serves both). The factorisation and the solves take a frame
-  // each, so that neither frame carries both. (simulation thread)
-  void analyse_registration(bool registered) {
-    analysis_due_ |= registered;
-    if (analysis_springs_) return analyse_factorised();
+  // each, so that neither frame carries both. Returns whether this frame ran a part of it.
+  // (simulation thread)
+  bool analyse_registration() {
+    if (analysis_springs_) {
+      analyse_factorised();
+      return true;
+    }
     const ros::WallTime now = ros::WallTime::now();
-    if (!analysis_due_ || now < next_analysis_) return;
+    if (!analysis_due_ || now < next_analysis_) return false;
     next_analysis_ = now + ros::WallDuration(uncertainty_period_);
     analysis_due_ = false;
     try {
@@ -539,6 +544,7 @@ class LiverSimNode {
     } catch (const std::runtime_error& e) {
       ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", e.what());
     }
+    return true;
   }
 
   // The analysis's second frame: the solves on the factor of the frame before.
@@ -653,13 +659,14 @@ class LiverSimNode {
     instruments_->publish(*model_, s.header);
   }
 
-  // While a frame runs longer than one frame (a factorisation, a cloud's analysis), ~status
-  // keeps its rate: the last step's status again, state "busy", so that a guidance stack
-  // watching it sees a live node whose mesh is its last good state. (timer, beside the loop)
+  // While a frame runs long (a factorisation, a part of the analysis), ~status keeps at least
+  // the loop's rate: the last step's status again, state "busy", every half frame, so that a
+  // guidance stack watching it sees a live node whose mesh is its last good state. Half a
+  // frame leaves the other half for the scheduler on a busy computer. (timer, beside the loop)
   void on_heartbeat(const ros::WallTimerEvent&) {
     std::lock_guard<std::mutex> lock(status_mutex_);
     const ros::WallTime now = ros::WallTime::now();
-    const ros::WallDuration period(frame_period_);
+    const ros::WallDuration period(0.5 * frame_period_);
     if (frame_start_.isZero() || last_status_time_.isZero() || now - frame_start_ < period ||
         now - last_status_time_ < period)
       return;
