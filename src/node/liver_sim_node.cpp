@@ -221,17 +221,13 @@ class LiverSimNode {
     while (ros::ok()) {
       // The last line of the barrier: a fault the frame's own guards did not catch (publishing,
       // diagnostics) is counted, and the loop goes on.
+      {
+        std::lock_guard<std::mutex> lock(status_mutex_);
+        frame_start_ = ros::WallTime::now();
+      }
       try {
         must_step |= guarded_inputs(loop);
-        {
-          std::lock_guard<std::mutex> lock(status_mutex_);
-          frame_start_ = ros::WallTime::now();
-        }
         must_step = simulate_frame(must_step);
-        {
-          std::lock_guard<std::mutex> lock(status_mutex_);
-          frame_start_ = ros::WallTime();
-        }
         const ros::WallTime now = ros::WallTime::now();
         if (now >= next_publish) {
           const ros::WallDuration publish_period(1.0 / publish_rate_);
@@ -245,6 +241,10 @@ class LiverSimNode {
         fault(std::string("in the loop: ") + e.what());
       } catch (...) {
         fault("in the loop: exception of unknown type");
+      }
+      {
+        std::lock_guard<std::mutex> lock(status_mutex_);
+        frame_start_ = ros::WallTime();
       }
       loop.sleep();
     }
