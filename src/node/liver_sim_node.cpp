@@ -8,7 +8,6 @@
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 #include <pcl_conversions/pcl_conversions.h>
-#include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <std_srvs/Trigger.h>
@@ -20,6 +19,8 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <deque>
 #include <memory>
@@ -176,16 +177,23 @@ class LiverSimNode {
       std::lock_guard<std::mutex> lock(mutex_);
       pending_config_ = c;
     });
-    // The heartbeat has a queue and a thread of its own: message callbacks never delay it.
-    ros::NodeHandle heartbeat_nh(nh);
-    heartbeat_nh.setCallbackQueue(&heartbeat_queue_);
-    heartbeat_ = heartbeat_nh.createWallTimer(ros::WallDuration(0.005), &LiverSimNode::on_heartbeat, this);
   }
 
-  // Called from the thread that starts the callbacks' spinner (its processors and priority).
+  ~LiverSimNode() {
+    stop_heartbeat_ = true;
+    if (heartbeat_.joinable()) heartbeat_.join();
+  }
+
+  // The heartbeat's thread of its own, which neither message callbacks nor roscpp's timer
+  // thread can delay. Called from the thread that starts the callbacks' spinner (its processors
+  // and priority).
   void start_heartbeat() {
-    heartbeat_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &heartbeat_queue_);
-    heartbeat_spinner_->start();
+    heartbeat_ = std::thread([this] {
+      while (!stop_heartbeat_ && ros::ok()) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        heartbeat();
+      }
+    });
   }
 
   // ~parent_frame and ~parent_transform put the model frame in the OR's tf tree (a static
@@ -662,8 +670,8 @@ class LiverSimNode {
   // While a frame runs long (a factorisation, a part of the analysis), ~status keeps at least
   // the loop's rate: the last step's status again, state "busy", every half frame, so that a
   // guidance stack watching it sees a live node whose mesh is its last good state. Half a
-  // frame leaves the other half for the scheduler on a busy computer. (timer, beside the loop)
-  void on_heartbeat(const ros::WallTimerEvent&) {
+  // frame leaves the other half for the scheduler on a busy computer. (heartbeat thread)
+  void heartbeat() {
     std::lock_guard<std::mutex> lock(status_mutex_);
     const ros::WallTime now = ros::WallTime::now();
     const ros::WallDuration period(0.5 * frame_period_);
@@ -882,10 +890,8 @@ class LiverSimNode {
   uint64_t clouds_ = 0;
   std::string last_rejection_, fresh_text_;
 
-  // Last: the heartbeat's thread stops before anything it reads goes.
-  ros::CallbackQueue heartbeat_queue_;
-  ros::WallTimer heartbeat_;
-  std::unique_ptr<ros::AsyncSpinner> heartbeat_spinner_;
+  std::thread heartbeat_;
+  std::atomic<bool> stop_heartbeat_{false};
 };
 
 }  // namespace liver_sim
