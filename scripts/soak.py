@@ -133,7 +133,8 @@ class Soak:
         self.pose_pub = rospy.Publisher("instruments/tool/pose", PoseStamped, queue_size=1)
         self.command_pub = rospy.Publisher("instrument_command", InstrumentCommand, queue_size=10)
         self.cloud_pub = rospy.Publisher("points", PointCloud2, queue_size=1)
-        rospy.Subscriber("liver_sim/status", SimulationStatus, self.on_status, queue_size=100)
+        # TCP_NODELAY: without it, Nagle's algorithm may hold a small message for the peer's delayed ACK.
+        rospy.Subscriber("liver_sim/status", SimulationStatus, self.on_status, queue_size=100, tcp_nodelay=True)
         rospy.Subscriber("liver_sim/wrench", WrenchStamped, self.on_wrench, queue_size=100)
         rospy.Subscriber("liver_sim/mesh", rospy.AnyMsg, self.on_mesh, queue_size=2)
         rospy.Subscriber("liver_sim/vessels", rospy.AnyMsg, self.on_marker, callback_args="vessels", queue_size=2)

@@ -42,8 +42,9 @@ TEST(SurfaceLocator, FindsTheClosestTriangleExactly) {
 TEST(SurfaceLocator, ACutoffKeepsTheSearchExactWithinIt) {
   // A large triangle (1 m) at z = 0 and, 4 mm above its corner, twenty small ones (1 mm): a
   // point 1 mm above the corner is nearest the large triangle, whose centroid is 0.3 m away,
-  // behind the small ones'. Within the cutoff the hit must be exact; beyond it, it only has to
-  // lie beyond it. Killed by a search bound without the triangles' reach (tried).
+  // behind the small ones' (about 3 mm away, beyond the 2 mm cutoff). Within the cutoff the hit
+  // must be exact; beyond it, it only has to lie beyond it. Killed by a search bound without the
+  // triangles' reach (tried).
   std::vector<Eigen::Vector3d> nodes = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
   std::vector<Eigen::Vector3i> triangles = {{0, 1, 2}};
   for (int k = 0; k < 20; ++k) {
@@ -58,11 +59,11 @@ TEST(SurfaceLocator, ACutoffKeepsTheSearchExactWithinIt) {
   for (size_t t = 0; t < triangles.size(); ++t) F.row(t) = triangles[t].transpose();
   SurfaceLocator locator;
   locator.build(x, F);
-  const SurfaceLocator::Hit near = locator.closest(Eigen::Vector3d(0.015, 0.015, 0.001), nullptr, 0.005);
+  const SurfaceLocator::Hit near = locator.closest(Eigen::Vector3d(0.015, 0.015, 0.001), nullptr, 0.002);
   EXPECT_EQ(near.triangle, 0);
   EXPECT_NEAR(near.distance, 0.001, 1e-12);
-  const SurfaceLocator::Hit far = locator.closest(Eigen::Vector3d(0.015, 0.015, -0.02), nullptr, 0.005);
-  EXPECT_GT(far.distance, 0.005);
+  const SurfaceLocator::Hit far = locator.closest(Eigen::Vector3d(0.015, 0.015, -0.02), nullptr, 0.002);
+  EXPECT_GT(far.distance, 0.002);
 }
 
 // A block fixed at its base, one spring pulling a top-face point up.
@@ -295,7 +296,11 @@ TEST(PhantomRegistration, UpdatesSpreadOverFramesAreTheUpdatesOfOneFrame) {
   const std::vector<SurfaceTarget> springs = per_frame.cloud_springs();
   per_frame.refine();
   ASSERT_EQ(per_frame.cloud_springs().size(), springs.size());
-  for (size_t i = 0; i < springs.size(); ++i) EXPECT_EQ(per_frame.cloud_springs()[i].point, springs[i].point);
+  for (size_t i = 0; i < springs.size(); ++i) {
+    EXPECT_EQ(per_frame.cloud_springs()[i].point, springs[i].point);
+    EXPECT_EQ(per_frame.cloud_springs()[i].triangle, springs[i].triangle);
+    EXPECT_EQ(per_frame.cloud_springs()[i].weights, springs[i].weights);
+  }
 }
 
 TEST(PhantomRegistration, RecoversALiftFromNoisyPartialClouds) {

@@ -135,6 +135,8 @@ class SurfaceRegistration {
   // updates the springs stay put: correspondences that switch triangles would keep the residual
   // from reaching the tolerance.)
   RegistrationFrame refine();
+  // The last cloud has correspondence updates left for refine().
+  bool updates_pending() const { return updates_left_ > 0; }
 
   // The next cloud is rigidly aligned first (ICP from the current alignment), whatever
   // options.rigid_alignment says: a camera moved or was recalibrated.
@@ -204,8 +206,8 @@ class SurfaceRegistration {
   // One model step with the registration's strategy and iteration cap; adds to the frame.
   void solve(RegistrationFrame& frame);
   // Up to `count` more correspondence updates of the current cloud (of options.
-  // correspondence_updates), each followed by a solve.
-  void continue_updates(int count, RegistrationFrame& frame);
+  // correspondence_updates), each followed by a solve. Returns whether one was solved.
+  bool continue_updates(int count, RegistrationFrame& frame);
 
   LiverModel& model_;
   RegistrationOptions options_;

@@ -440,7 +440,9 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   const auto t_frame = frame_start_ = Clock::now();
   RegistrationFrame frame;
   if (viewpoint && !viewpoint->allFinite()) throw std::invalid_argument("the viewpoint is not finite");
-  // The points of the previous frame stay in use if this cloud is refused (swapped, not copied).
+  // The points of the previous frame stay in use if this cloud is refused (swapped, not copied);
+  // their remaining updates do not (the search state may be this cloud's).
+  updates_left_ = 0;
   points_.swap(previous_points_);
   frame.input_points = filter(cloud);
   if (points_->empty()) {
@@ -462,8 +464,6 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   frame.used_points = static_cast<int>(points_->size());
   frame.filter_ms = ms_since(t_frame);
   const std::optional<Eigen::Vector3d> eye = viewpoint ? std::optional<Eigen::Vector3d>(alignment_ * *viewpoint) : viewpoint;
-  // A refused cloud leaves the previous one without further updates: the search state is this one's.
-  updates_left_ = 0;
   const auto t0 = Clock::now();
   const int found = find_correspondences(true, eye, frame);
   frame.correspondence_ms += ms_since(t0);
@@ -518,7 +518,8 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
   frame.factorizations += frame.step.factorizations;
 }
 
-void SurfaceRegistration::continue_updates(int count, RegistrationFrame& frame) {
+bool SurfaceRegistration::continue_updates(int count, RegistrationFrame& frame) {
+  bool solved = false;
   for (; count > 0 && updates_left_ > 0; --count) {
     const auto t0 = Clock::now();
     const RegistrationFrame applied = frame;
@@ -529,14 +530,16 @@ void SurfaceRegistration::continue_updates(int count, RegistrationFrame& frame) 
       frame.inlier_fraction = applied.inlier_fraction;
       frame.stiffness_scale = applied.stiffness_scale;
       updates_left_ = 0;
-      return;
+      return solved;
     }
     frame.correspondences = found;
     cloud_springs_.swap(targets_);
     apply_springs();
     solve(frame);
+    solved = true;
     updates_left_ = frame.step.status == StepResult::Status::Diverged ? 0 : updates_left_ - 1;
   }
+  return solved;
 }
 
 RegistrationFrame SurfaceRegistration::refine() {
@@ -548,8 +551,8 @@ RegistrationFrame SurfaceRegistration::refine() {
   frame.inlier_fraction = last_.inlier_fraction;
   frame.coverage = last_.coverage;
   frame.stiffness_scale = last_.stiffness_scale;
-  if (updates_left_ > 0) {
-    continue_updates(options_.frame_updates, frame);
+  // An update that finds the points no longer supported leaves the springs: they are solved.
+  if (updates_left_ > 0 && continue_updates(options_.frame_updates, frame)) {
     last_.correspondences = frame.correspondences;
     last_.coverage = frame.coverage;
     last_.inlier_fraction = frame.inlier_fraction;

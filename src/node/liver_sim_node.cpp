@@ -298,6 +298,10 @@ class LiverSimNode {
       if (registering_) {
         const RegistrationFrame f = registration_->refine();
         registration_rms_ = f.rms;
+        correspondences_ = f.correspondences;  // a later update of the cloud may have moved them
+        registered_.coverage = f.coverage;
+        registered_.inlier_fraction = f.inlier_fraction;
+        registered_.rms_all = f.rms_all;
         return f.step;
       }
       return model_->step();
@@ -316,7 +320,7 @@ class LiverSimNode {
       if (state_ != "diverged" && state_ != "fault") state_ = "idle";
       return false;
     }
-    if (r.status != StepResult::Status::NotConverged) registering_ = false;
+    if (r.status != StepResult::Status::NotConverged && !registration_->updates_pending()) registering_ = false;
     ++steps_;
     step_times_.push_back(ros::WallTime::now());
     last_ = r;
@@ -327,7 +331,8 @@ class LiverSimNode {
       ROS_WARN_THROTTLE(1.0, "liver_sim: step diverged (%s); kept the last good state", r.message.c_str());
     publish_status(r);
     // Continue next frame while iterating; a diverged step waits for new input.
-    return r.status == StepResult::Status::NotConverged || (r.converged() && r.iterations > 0);
+    return r.status == StepResult::Status::NotConverged || (r.converged() && r.iterations > 0) ||
+           (registering_ && registration_->updates_pending());
   }
 
   // Moves pending inputs into the model; true when something changed. The node's lock is not
@@ -667,14 +672,14 @@ class LiverSimNode {
     instruments_->publish(*model_, s.header);
   }
 
-  // While a frame runs long (a factorisation, a part of the analysis), ~status keeps at least
-  // the loop's rate: the last step's status again, state "busy", every half frame, so that a
-  // guidance stack watching it sees a live node whose mesh is its last good state. Half a
-  // frame leaves the other half for the scheduler on a busy computer. (heartbeat thread)
+  // While a frame runs longer than one frame (a factorisation, a part of the analysis), ~status
+  // keeps the loop's rate: the last step's status again, state "busy", every frame, so that a
+  // guidance stack watching it sees a live node whose mesh is its last good state. (heartbeat
+  // thread)
   void heartbeat() {
     std::lock_guard<std::mutex> lock(status_mutex_);
     const ros::WallTime now = ros::WallTime::now();
-    const ros::WallDuration period(0.5 * frame_period_);
+    const ros::WallDuration period(frame_period_);
     if (frame_start_.isZero() || last_status_time_.isZero() || now - frame_start_ < period ||
         now - last_status_time_ < period)
       return;
