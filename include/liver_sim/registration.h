@@ -205,6 +205,8 @@ class SurfaceRegistration {
   double all_points_rms();
   // One model step with the registration's strategy and iteration cap; adds to the frame.
   void solve(RegistrationFrame& frame);
+  // The last update's `found` correspondences become the cloud's springs, and are solved.
+  void accept_update(int found, RegistrationFrame& frame);
   // Up to `count` more correspondence updates of the current cloud (of options.
   // correspondence_updates), each followed by a solve. Returns whether one was solved.
   bool continue_updates(int count, RegistrationFrame& frame);

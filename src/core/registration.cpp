@@ -472,10 +472,7 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
                             : "no point of the cloud lies within max_distance of the surface");
   const std::string why = unsupported(found, frame.coverage);
   if (!why.empty()) refuse(why);
-  frame.correspondences = found;
-  cloud_springs_.swap(targets_);  // targets_ is refilled at the next update
-  apply_springs();
-  solve(frame);
+  accept_update(found, frame);
   if (frame.step.status != StepResult::Status::Diverged) updates_left_ = options_.correspondence_updates - 1;
   continue_updates(options_.frame_updates - 1, frame);
   frame.rms = spring_rms();
@@ -518,24 +515,28 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
   frame.factorizations += frame.step.factorizations;
 }
 
+void SurfaceRegistration::accept_update(int found, RegistrationFrame& frame) {
+  frame.correspondences = found;
+  cloud_springs_.swap(targets_);  // targets_ is refilled at the next update
+  apply_springs();
+  solve(frame);
+}
+
 bool SurfaceRegistration::continue_updates(int count, RegistrationFrame& frame) {
   bool solved = false;
   for (; count > 0 && updates_left_ > 0; --count) {
     const auto t0 = Clock::now();
-    const RegistrationFrame applied = frame;
+    const double coverage = frame.coverage, inlier_fraction = frame.inlier_fraction, scale = frame.stiffness_scale;
     const int found = find_correspondences(false, std::nullopt, frame);
     frame.correspondence_ms += ms_since(t0);
     if (!unsupported(found, frame.coverage).empty()) {  // the surface moved away from the points: the last springs stay
-      frame.coverage = applied.coverage;
-      frame.inlier_fraction = applied.inlier_fraction;
-      frame.stiffness_scale = applied.stiffness_scale;
+      frame.coverage = coverage;
+      frame.inlier_fraction = inlier_fraction;
+      frame.stiffness_scale = scale;
       updates_left_ = 0;
       return solved;
     }
-    frame.correspondences = found;
-    cloud_springs_.swap(targets_);
-    apply_springs();
-    solve(frame);
+    accept_update(found, frame);
     solved = true;
     updates_left_ = frame.step.status == StepResult::Status::Diverged ? 0 : updates_left_ - 1;
   }
