@@ -18,7 +18,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker
 
-from liver_sim.msg import SimulationStatus
+from liver_sim.msg import SimulationStatus, TargetCovariances
 
 
 def surface_samples(marker, spacing, rng):
@@ -62,6 +62,9 @@ def main():
     rospy.Subscriber("/liver_sim/status", SimulationStatus, lambda s: state["status"].append((time.time(), s)),
                      queue_size=100)
     rospy.Subscriber("/diagnostics", DiagnosticArray, on_diag, queue_size=10)
+    analyses = set()  # the uncertainty analyses' stamps: the analysis must go on while clouds come
+    rospy.Subscriber("/liver_sim/target_covariances", TargetCovariances,
+                     lambda c: analyses.add(c.analysis_stamp.to_sec()), queue_size=10)
     pub = rospy.Publisher("/points", PointCloud2, queue_size=1)
     while state["mesh"] is None or not state["status"] or state["status"][-1][1].state != "idle":
         time.sleep(0.2)
@@ -97,6 +100,8 @@ def main():
     print(f"clouds registered: {registered} ({registered / duration:.1f} per second)")
     print(f"cloud -> mesh latency over {len(lat)}/{len(sent)} clouds shown: median {np.median(lat):.0f} ms, "
           f"p95 {np.percentile(lat, 95):.0f} ms, max {lat.max():.0f} ms")
+    ran = sum(t0 <= a < t0 + duration for a in analyses)
+    print(f"uncertainty analyses while the clouds came: {ran} (one per {duration / max(ran, 1):.1f} s)")
     print(f"registration RMS {last.registration_rms * 1e3:.2f} mm, {last.correspondences} correspondences, "
           f"refused inputs {last.rejected_inputs - first.rejected_inputs}")
     print(f"1M-point cloud: {state['diag'].get('last cloud size')} points, node filter time "

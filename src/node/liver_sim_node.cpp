@@ -285,8 +285,7 @@ class LiverSimNode {
   bool simulate_frame(bool must_step) {
     bool stepped = false;
     const StepResult r = guard_.step(*model_, [&] {
-      // A frame with a part of the registration's analysis leaves the pending cloud to the next
-      // frame (a newer one may replace it): the two do not share a frame.
+      // A part of the registration's analysis runs only in a frame without a pending cloud.
       std::optional<RegistrationFrame> registered;
       if (!analyse_registration()) registered = register_pending_cloud();
       if (registered) registering_ = analysis_due_ = true;
@@ -361,6 +360,7 @@ class LiverSimNode {
       covariances_.clear();
       analysis_due_ = false;
       analysis_springs_.reset();
+      analysis_gives_way_until_ = ros::WallTime();
       steps_ = 0;
       reflected_stamp_ = ros::Time();
     }
@@ -540,15 +540,23 @@ class LiverSimNode {
   // At most once per ~uncertainty_period, after a cloud was registered: the targets'
   // covariances and the candidate supports the clouds call for (one factorisation of the
   // registered model's stiffness serves both). The factorisation and the solves take a frame
-  // each, so that neither frame carries both. Returns whether this frame ran a part of it.
+  // each, so that neither frame carries both. A due part gives way to a pending cloud (held
+  // back, the cloud would be lost to the next one) for at most one period, so that clouds
+  // faster than the loop do not starve it. Returns whether this frame ran a part of it.
   // (simulation thread)
   bool analyse_registration() {
+    const ros::WallTime now = ros::WallTime::now();
+    if (!analysis_springs_ && (!analysis_due_ || now < next_analysis_)) return false;
+    if (analysis_gives_way_until_.isZero()) analysis_gives_way_until_ = now + ros::WallDuration(uncertainty_period_);
+    if (now < analysis_gives_way_until_) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (pending_cloud_) return false;
+    }
+    analysis_gives_way_until_ = ros::WallTime();
     if (analysis_springs_) {
       analyse_factorised();
       return true;
     }
-    const ros::WallTime now = ros::WallTime::now();
-    if (!analysis_due_ || now < next_analysis_) return false;
     next_analysis_ = now + ros::WallDuration(uncertainty_period_);
     analysis_due_ = false;
     try {
@@ -869,6 +877,7 @@ class LiverSimNode {
   bool analysis_due_ = false;
   std::optional<std::vector<SurfaceTarget>> analysis_springs_;  // set: an analysis's factor awaits its solves
   ros::WallTime next_analysis_;
+  ros::WallTime analysis_gives_way_until_;  // zero: no part of the analysis is waiting
   ros::Time analysis_stamp_;
 
   // Shared with the heartbeat, under status_mutex_.
