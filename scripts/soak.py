@@ -11,24 +11,25 @@ jumps 3 cm across the lobe and back (the step stages the move). With the node's 
 
 Reports: messages sent and handled, RSS of the node at start (after a warm-up) and end, status
 messages and the largest gap between them (heartbeats included: state "busy", sent while a frame
-runs longer than one frame), the longest frame (the largest gap between the loop's own statuses),
-the node's simulation frames against the frames its
-rate asks for (dropped frames), pose-to-mesh latency early and late (a growing queue would make
-it grow), refused inputs. Every floating-point field of every message the node publishes on
-~status, ~wrench, ~mesh, ~instruments and ~vessels is checked for NaN and infinity.
+runs longer than one frame), the longest frame (the largest gap between the stamps of the loop's
+own statuses), the node's simulation frames against the frames its rate asks for (dropped
+frames), pose-to-mesh latency early and late (a growing queue would make it grow), refused
+inputs. Every floating-point field of every message the node publishes on ~status, ~wrench,
+~mesh, ~instruments and ~vessels is checked for NaN and infinity.
 
 Exits 1 when a check fails. Checks that hold at any speed: the node is alive; ~status carries
 every step (its step counter never skips one, a reset starting it again); RSS grew by at most
 10% + 20 MB; nothing non-finite was published (every floating-point field of every message);
 the refused inputs counted match those sent; with injected faults, some were counted and the
 node went on stepping after each. Wall-clock checks: no ~status gap longer than two frames of
-the node's rate, between arrivals here and between the node's stamps (arrivals include this
-script's own pauses); the achieved frame rate at least 90% of that rate; the late latency at most
-twice the early one + 0.2 s. As a rostest (--rostest) only the checks that hold at any speed are
-asserted, and a gap bound it can judge on a shared machine: none above --max-gap seconds (the
-node's step time budget makes a frame at most one Newton iteration and one stage long, about
-0.7 s on the phantom with contact; a loop that hangs or a step that runs its 16 stages through
-goes far beyond); the others are printed.
+the node's rate, between arrivals at a process of its own that only receives ~status (this one
+builds clouds, which pauses its receivers) and between the node's stamps; the achieved frame
+rate at least 90% of that rate; the late latency at most twice the early one + 0.2 s. As a
+rostest (--rostest) only the checks that hold at any speed are asserted, and a gap bound it can
+judge on a shared machine: none above --max-gap seconds (the node's step time budget makes a
+frame at most one Newton iteration and one stage long, about 0.7 s on the phantom with contact;
+a loop that hangs or a step that runs its 16 stages through goes far beyond); the others are
+printed.
 
 usage: scripts/soak.py [--duration S] [--points N] [--json FILE]      (a master and the node running)
        scripts/soak.sh [S]                                            (starts both, pinned; 600 s default)
@@ -37,13 +38,12 @@ usage: scripts/soak.py [--duration S] [--points N] [--json FILE]      (a master 
 import argparse
 import json
 import math
+import multiprocessing
 import os
 import struct
 import sys
 import threading
 import time
-import xmlrpc.client
-
 import xmlrpc.client
 
 import numpy as np
@@ -95,6 +95,21 @@ def marker_array_fields(raw):
     return fields
 
 
+def receive_status(stop, pipe):
+    """A process of its own that only receives ~status and notes when each message arrived
+    (monotonic clock, shared with the parent) and its stamp: the status gaps a subscriber sees.
+    The soak's own process builds 100,000-point clouds and reads meshes, which pauses its
+    receivers for up to 0.1-0.2 s (measured next to this receiver: no gap at those moments)."""
+    rospy.init_node("liver_sim_soak_status", anonymous=True, argv=[], disable_signals=True)
+    arrivals = []
+    # TCP_NODELAY: without it, Nagle's algorithm may hold a small message for the peer's delayed ACK.
+    rospy.Subscriber("liver_sim/status", SimulationStatus,
+                     lambda m: arrivals.append((time.monotonic(), m.header.stamp.to_sec())),
+                     queue_size=100, tcp_nodelay=True)
+    stop.wait()
+    pipe.send(list(arrivals))
+
+
 def node_pid():
     """The pid of this master's liver_sim node, from the node itself (its slave API): other
     liver_sim nodes may run on the same computer (tests in parallel, other sessions)."""
@@ -133,8 +148,7 @@ class Soak:
         self.pose_pub = rospy.Publisher("instruments/tool/pose", PoseStamped, queue_size=1)
         self.command_pub = rospy.Publisher("instrument_command", InstrumentCommand, queue_size=10)
         self.cloud_pub = rospy.Publisher("points", PointCloud2, queue_size=1)
-        # TCP_NODELAY: without it, Nagle's algorithm may hold a small message for the peer's delayed ACK.
-        rospy.Subscriber("liver_sim/status", SimulationStatus, self.on_status, queue_size=100, tcp_nodelay=True)
+        rospy.Subscriber("liver_sim/status", SimulationStatus, self.on_status, queue_size=100)
         rospy.Subscriber("liver_sim/wrench", WrenchStamped, self.on_wrench, queue_size=100)
         rospy.Subscriber("liver_sim/mesh", rospy.AnyMsg, self.on_mesh, queue_size=2)
         rospy.Subscriber("liver_sim/vessels", rospy.AnyMsg, self.on_marker, callback_args="vessels", queue_size=2)
@@ -239,6 +253,11 @@ class Soak:
         pid = node_pid()
         if pid is None:
             raise RuntimeError("no liver_sim_node process")
+        spawn = multiprocessing.get_context("spawn")  # a fresh interpreter: no rospy state of this one
+        receiver_stop = spawn.Event()
+        arrivals_in, arrivals_out = spawn.Pipe(duplex=False)
+        receiver = spawn.Process(target=receive_status, args=(receiver_stop, arrivals_out), daemon=True)
+        receiver.start()
         deadline = time.monotonic() + 60
         while not self.status and time.monotonic() < deadline:
             time.sleep(0.1)
@@ -264,19 +283,23 @@ class Soak:
         rss_end = rss_mb(pid) if os.path.exists("/proc/%d" % pid) else float("nan")
         t_end = time.monotonic()
         stop.set()
+        receiver_stop.set()
+        arrivals = arrivals_in.recv() if arrivals_in.poll(30) else []
+        receiver.join(5)
         for t in threads:
             t.join(5)
-        return self.report(pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end)
+        return self.report(pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end, arrivals)
 
-    def report(self, pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end):
+    def report(self, pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end, arrivals):
+        # Between arrivals at the receiver of its own (receive_status), and between the node's
+        # stamps (when it published).
+        received = [t for t, _ in arrivals if t_start <= t <= t_end]
+        gaps = [b - a for a, b in zip(received, received[1:])]
         with self.lock:
             window = [(t, m) for t, m in self.status if t_start <= t <= t_end]
-            gaps = [b[0] - a[0] for a, b in zip(window, window[1:])]
-            # The same between the node's stamps: when it published, without this script's own
-            # pauses (it builds 100,000-point clouds and reads meshes while it listens).
             stamp_gaps = [b[1].header.stamp.to_sec() - a[1].header.stamp.to_sec() for a, b in zip(window, window[1:])]
             # Between the loop's own statuses, heartbeats ("busy") left out: the longest frame.
-            own = [t for t, m in window if m.state != "busy"]
+            own = [m.header.stamp.to_sec() for _, m in window if m.state != "busy"]
             frame_gaps = [b - a for a, b in zip(own, own[1:])]
             busy = sum(1 for _, m in window if m.state == "busy")
             # Steps whose status never came: the counter advanced by more than one (a reset
@@ -306,6 +329,7 @@ class Soak:
             "sent": sent,
             "rss_mb": {"start": round(rss_start, 1), "end": round(rss_end, 1)},
             "status_messages": len(window),
+            "status_messages_at_the_receiver": len(received),
             "status_max_gap_s": round(max(gaps), 3) if gaps else None,
             "status_gaps_over_two_frames": sum(1 for g in gaps if g > 2.0 / self.node_rate),
             "status_max_stamp_gap_s": round(max(stamp_gaps), 3) if stamp_gaps else None,
