@@ -324,6 +324,18 @@ MUTATIONS = [
       "if (k > 1 && Clock::now() > deadline_) {",
       "if (k > 1 && false) {",
       "out of time between stages ignored (the instruments reach their target, the tissue does not)"),
+    M("R5", "src/core/newton_stepper.cpp",
+      "      if (Clock::now() + factorization_time_ > deadline_) {",
+      "      if (false) {",
+      "a modified-Newton refresh that starts its factorisation past the budget"),
+    M("R6", "src/core/newton_stepper.cpp",
+      "        result.out_of_time = true;\n        result.message = \"time budget\";\n        norm = residual(x_, r_, &reference);",
+      "        factor_valid_ = true;\n        result.out_of_time = true;\n        result.message = \"time budget\";\n        norm = residual(x_, r_, &reference);",
+      "a refresh deferred past the budget keeps the old factor (the next step does not refactorise)"),
+    M("R7", "src/core/newton_stepper.cpp",
+      "        result.out_of_time = true;\n        result.message = \"time budget\";\n        norm = residual(x_, r_, &reference);",
+      "        x_.swap(x_try_);\n        result.out_of_time = true;\n        result.message = \"time budget\";\n        norm = residual(x_, r_, &reference);",
+      "a refresh deferred past the budget keeps the trial point that found no descent"),
 ]
 
 

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <new>
 #include <stdexcept>
 
@@ -236,6 +237,47 @@ TEST(TimeBudget, AStepOutOfTimeLeavesTheInstrumentAtItsStage) {
   const Eigen::Vector3d expected = start + (probe.position - start) / 16;
   EXPECT_LE((m.contact().pose(0).translation() - expected).norm(), 1e-12)
       << m.contact().pose(0).translation().transpose();
+}
+
+// Modified Newton on the factor of a tenth of the suction, asked for the full suction in one
+// iteration: that factor finds no descent, and the iteration is redone on a new factor. With an
+// unlimited budget the step refactorises and moves. Past its budget the step must not start the
+// factorisation: it ends where the iteration started (not rolled back, out of time) and the next
+// step begins with the factorisation, doing what the refresh would have done.
+// Kills a refresh that ignores the budget (a factorisation in the first step past it), a
+// deferral that keeps the old factor (none in the next step) and one that keeps the trial point
+// (each tried).
+TEST(TimeBudget, ANoDescentRefreshPastTheBudgetWaitsForTheNextStep) {
+  Scene s = aspiration_cube();
+  s.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
+  auto at_a_tenth = [&](double budget) {
+    auto m = std::make_unique<LiverModel>(load_scene_mesh(s), s);
+    m->set_load_scale(0.1);
+    EXPECT_TRUE(m->step().converged());
+    SolverOptions o = s.solver;
+    o.max_iterations = 1;
+    o.time_budget = budget;
+    EXPECT_EQ(m->set_solver_options(o), "");
+    m->set_load_scale(1.0);
+    return m;
+  };
+  std::unique_ptr<LiverModel> unlimited = at_a_tenth(std::numeric_limits<double>::infinity());
+  const Eigen::VectorXd start = unlimited->positions();
+  const StepResult refreshed = unlimited->step();
+  ASSERT_EQ(refreshed.factorizations, 1) << "the old factor found a descent: the scene no longer tests the refresh";
+  ASSERT_GT((unlimited->positions() - start).norm(), 0);
+
+  std::unique_ptr<LiverModel> late = at_a_tenth(1e-9);
+  ASSERT_EQ(late->positions(), start);
+  const StepResult deferred = late->step();
+  EXPECT_EQ(deferred.status, StepResult::Status::NotConverged) << deferred.message;
+  EXPECT_TRUE(deferred.out_of_time);
+  EXPECT_EQ(deferred.factorizations, 0);
+  EXPECT_EQ(late->positions(), start);
+  const StepResult next = late->step();
+  EXPECT_EQ(next.factorizations, 1);
+  EXPECT_LE((late->positions() - unlimited->positions()).cwiseAbs().maxCoeff(),
+            1e-9 * (unlimited->positions() - start).cwiseAbs().maxCoeff());
 }
 
 // --- Bounds --------------------------------------------------------------------------------------
