@@ -72,7 +72,9 @@ def phase(state, analyses, pub, base, duration, rng):
     last = state["status"][-1][1]
     registered = last.clouds_registered - first.clouds_registered
     lat = np.array([(arrived[s] - s * 1e-9) * 1e3 for s in sent if s in arrived])
-    ran = sum(t0 <= a < t0 + duration for a in analyses)
+    ran = sum(t0 <= a < t0 + duration for a in list(analyses))  # the callback may add meanwhile
+    if not len(lat):
+        return f"{len(sent)} clouds sent, none shown on the mesh"
     return (f"{len(sent)} clouds of {len(base)} points sent at 15 Hz over {duration:.0f} s; "
             f"registered {registered} ({registered / duration:.1f} per second); "
             f"cloud -> mesh latency over {len(lat)} clouds shown: median {np.median(lat):.0f} ms, "

@@ -106,7 +106,9 @@ def receive_status(stop, pipe):
     rospy.Subscriber("liver_sim/status", SimulationStatus,
                      lambda m: arrivals.append((time.monotonic(), m.header.stamp.to_sec())),
                      queue_size=100, tcp_nodelay=True)
-    stop.wait()
+    while not stop.wait(1.0):
+        if not multiprocessing.parent_process().is_alive():
+            return
     pipe.send(list(arrivals))
 
 
@@ -258,6 +260,7 @@ class Soak:
         arrivals_in, arrivals_out = spawn.Pipe(duplex=False)
         receiver = spawn.Process(target=receive_status, args=(receiver_stop, arrivals_out), daemon=True)
         receiver.start()
+        arrivals_out.close()  # the child's end: a receiver that dies unsent ends recv() at once
         deadline = time.monotonic() + 60
         while not self.status and time.monotonic() < deadline:
             time.sleep(0.1)
@@ -284,8 +287,12 @@ class Soak:
         t_end = time.monotonic()
         stop.set()
         receiver_stop.set()
-        arrivals = arrivals_in.recv() if arrivals_in.poll(30) else []
+        try:
+            arrivals = arrivals_in.recv() if arrivals_in.poll(30) else []
+        except EOFError:
+            arrivals = []
         receiver.join(5)
+        self.receiver_exit = receiver.exitcode
         for t in threads:
             t.join(5)
         return self.report(pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end, arrivals)
@@ -330,6 +337,7 @@ class Soak:
             "rss_mb": {"start": round(rss_start, 1), "end": round(rss_end, 1)},
             "status_messages": len(window),
             "status_messages_at_the_receiver": len(received),
+            "status_receiver_exit_code": self.receiver_exit,
             "status_max_gap_s": round(max(gaps), 3) if gaps else None,
             "status_gaps_over_two_frames": sum(1 for g in gaps if g > 2.0 / self.node_rate),
             "status_max_stamp_gap_s": round(max(stamp_gaps), 3) if stamp_gaps else None,
@@ -355,6 +363,7 @@ class Soak:
         checks = {
             "node alive": r["node_alive"],
             "status kept flowing (messages in both halves of the run)": min(halves) > 0,
+            "the status receiver (a process of its own) received statuses": len(received) > 1,
             "memory flat (end <= 1.1 start + 20 MB)": rss_end <= 1.1 * rss_start + 20,
             "every step's status received (the step counter never skips)": skipped == 0,
             "nothing non-finite published (status, wrench, mesh, instruments, vessels)": not self.non_finite,

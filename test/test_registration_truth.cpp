@@ -439,7 +439,7 @@ struct Beam {
     for (int k = 0; k < 5; ++k) registration.register_cloud(top, Eigen::Vector3d(0.03, 0.01, 0.3));
     StateCompliance compliance(model);
     compliance.factorize();
-    const int held = registration.estimate_supports(compliance);
+    const int held = registration.estimate_supports(compliance, registration.cloud_springs());
     return {held, registration.support_gains()};
   }
 };
@@ -471,7 +471,7 @@ TEST(CandidateSupports, NoneToTryIsNoneHeld) {
   ASSERT_FALSE(registration.cloud_springs().empty());
   StateCompliance compliance(model);
   compliance.factorize();
-  EXPECT_EQ(registration.estimate_supports(compliance), -1);
+  EXPECT_EQ(registration.estimate_supports(compliance, registration.cloud_springs()), -1);
   EXPECT_TRUE(registration.supports_held().empty());
 }
 
@@ -482,7 +482,7 @@ double estimate_over_rounds(SurfaceRegistration& registration, StateCompliance& 
   for (int round = 0; round < 12; ++round) {
     for (int k = 0; k < 3; ++k) registration.register_cloud(top, Eigen::Vector3d(0.03, 0.01, 0.3));
     compliance.factorize();
-    factor = registration.estimate_tissue_stiffness(compliance);
+    factor = registration.estimate_tissue_stiffness(compliance, registration.cloud_springs());
   }
   return factor;
 }

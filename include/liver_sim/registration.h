@@ -146,25 +146,26 @@ class SurfaceRegistration {
   // is held, from the next cloud on, when holding it would take at least options.support_gain of
   // the springs' systematic pull away: the surface the camera sees is free of forces in surgery
   // (but for the instruments), so a net pull of the springs on a patch of it (a few cm, where
-  // the sensor's noise cancels) measures what the model gets wrong. Each candidate not held is
-  // tried linearised at the state `compliance` was factorised at (with the current springs): a
+  // the sensor's noise cancels) measures what the model gets wrong. `springs` are the cloud's
+  // springs `compliance` was factorised with (cloud_springs() then). Each candidate not held is
+  // tried linearised at the state `compliance` was factorised at: a
   // reaction spread over its nodes holding their mean at rest, R = (Phi^T A^-1 Phi)^-1 Phi^T
   // (X - x), moves the state by A^-1 Phi R, and the pull is evaluated there. The best one is held (at most one per call: the next call sees
   // its effect); held candidates stay held until clear(). Returns the candidate newly held, or
   // -1. Costs one solve with three columns per candidate.
-  int estimate_supports(StateCompliance& compliance);
+  int estimate_supports(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs);
   // The tissue's stiffness factor (LiverModel::set_stiffness_scale) the clouds call for: the
   // surface the camera sees is free of forces (but for the instruments), so the springs' net
   // pull on the patches they touch, r_p, measures what the model gets wrong; a model too soft
   // sags where the cloud does not, a model too stiff resists the cloud's deformation. One
   // Gauss-Newton step on ln s minimising sum_p |r_p|^2, linearised at the state `compliance`
-  // was factorised at with the current springs: a factor e^t moves the state by
+  // was factorised at with its springs (as estimate_supports): a factor e^t moves the state by
   // -t A^-1 f_int, which changes r_p by t J_p, so t = -sum r_p.J_p / sum |J_p|^2 (at most a
   // factor 2 per call, the factor within [1 / max, max] of options.max_tissue_stiffness_factor).
   // Applied to the model from its next step; successive calls (one per analysis) converge it.
   // Returns the factor (unchanged with max_tissue_stiffness_factor 1). Costs one solve with
   // one column.
-  double estimate_tissue_stiffness(StateCompliance& compliance);
+  double estimate_tissue_stiffness(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs);
 
   // Per candidate: held, and the share of the springs' pull it took away when last tried.
   const std::vector<bool>& supports_held() const { return held_; }
@@ -198,7 +199,7 @@ class SurfaceRegistration {
   double spring_rms() const;
   // The springs' systematic pull at positions x (N^2): the sum over the surface patches of their
   // net spring force squared (the sensor's noise cancels within a patch, a model error does not).
-  double systematic_pull(const Eigen::VectorXd& x) const;
+  double systematic_pull(const std::vector<SurfaceTarget>& springs, const Eigen::VectorXd& x) const;
   // The cloud's springs plus those of the held supports, to the model.
   void apply_springs();
   // RegistrationFrame::rms_all at the model's current state (the last update's candidates).

@@ -157,19 +157,19 @@ void SurfaceRegistration::apply_springs() {
   model_.set_surface_targets(std::move(springs));
 }
 
-double SurfaceRegistration::systematic_pull(const Eigen::VectorXd& x) const {
+double SurfaceRegistration::systematic_pull(const std::vector<SurfaceTarget>& springs, const Eigen::VectorXd& x) const {
   double sum = 0;
-  for (const Eigen::Vector3d& f : patch_spring_forces(patches_, model_.boundary(), cloud_springs_, x)) sum += f.squaredNorm();
+  for (const Eigen::Vector3d& f : patch_spring_forces(patches_, model_.boundary(), springs, x)) sum += f.squaredNorm();
   return sum;
 }
 
-int SurfaceRegistration::estimate_supports(StateCompliance& compliance) {
+int SurfaceRegistration::estimate_supports(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs) {
   std::vector<int> tried;
   for (size_t c = 0; c < supports_.size(); ++c)
     if (!held_[c]) tried.push_back(static_cast<int>(c));
   if (tried.empty()) return -1;
   const Eigen::VectorXd& x = compliance.state();
-  const double before = systematic_pull(x);
+  const double before = systematic_pull(springs, x);
   if (!(before > 0)) return -1;
   // Phi: per candidate, unit forces in x, y, z spread over its nodes; U = A^-1 Phi.
   Eigen::MatrixXd Phi = Eigen::MatrixXd::Zero(x.size(), 3 * tried.size()), U;
@@ -185,7 +185,7 @@ int SurfaceRegistration::estimate_supports(StateCompliance& compliance) {
     const auto phi = Phi.middleCols(3 * k, 3), u = U.middleCols(3 * k, 3);
     const Eigen::Matrix3d M = phi.transpose() * u;
     const Eigen::Vector3d R = M.ldlt().solve(phi.transpose() * (X - x));
-    const double gain = 1.0 - systematic_pull(x + u * R) / before;
+    const double gain = 1.0 - systematic_pull(springs, x + u * R) / before;
     gains_[tried[k]] = gain;
     if (gain >= options_.support_gain && (best < 0 || gain > gains_[best])) best = tried[k];
   }
@@ -205,15 +205,16 @@ std::string SurfaceRegistration::set_stiffness(double stiffness) {
   return error;
 }
 
-double SurfaceRegistration::estimate_tissue_stiffness(StateCompliance& compliance) {
+double SurfaceRegistration::estimate_tissue_stiffness(StateCompliance& compliance,
+                                                      const std::vector<SurfaceTarget>& springs) {
   const double scale = model_.stiffness_scale();
-  if (cloud_springs_.empty() || options_.max_tissue_stiffness_factor == 1) return scale;
+  if (springs.empty() || options_.max_tissue_stiffness_factor == 1) return scale;
   const Eigen::VectorXd& x = compliance.state();
   const Eigen::MatrixX3i& F = model_.boundary();
-  const std::vector<Eigen::Vector3d> pull = patch_spring_forces(patches_, F, cloud_springs_, x);
+  const std::vector<Eigen::Vector3d> pull = patch_spring_forces(patches_, F, springs, x);
   Eigen::MatrixXd u;
   compliance.solve(-compliance.internal_forces(), u);  // d x / d ln s
-  const std::vector<Eigen::Vector3d> moved = patch_spring_forces(patches_, F, cloud_springs_, x + u.col(0));
+  const std::vector<Eigen::Vector3d> moved = patch_spring_forces(patches_, F, springs, x + u.col(0));
   // Huber weights over the patches the springs touch, of width twice their median pull: an
   // instrument pressing where the camera sees does not decide the tissue's stiffness.
   std::vector<double> sizes;

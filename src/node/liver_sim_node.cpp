@@ -540,10 +540,10 @@ class LiverSimNode {
   // At most once per ~uncertainty_period, after a cloud was registered: the targets'
   // covariances and the candidate supports the clouds call for (one factorisation of the
   // registered model's stiffness serves both). The factorisation and the solves take a frame
-  // each, so that neither frame carries both. A due part gives way to a pending cloud (held
-  // back, the cloud would be lost to the next one) for at most one period, so that clouds
-  // faster than the loop do not starve it. Returns whether this frame ran a part of it.
-  // (simulation thread)
+  // each, so that neither frame carries both. Each gives way to a pending cloud (held back, the
+  // cloud would be lost to the next one) for at most one period, so that clouds faster than the
+  // loop do not starve it; the solves use the springs of the factorised state, whatever clouds
+  // came between. Returns whether this frame ran a part of it. (simulation thread)
   bool analyse_registration() {
     const ros::WallTime now = ros::WallTime::now();
     if (!analysis_springs_ && (!analysis_due_ || now < next_analysis_)) return false;
@@ -562,13 +562,14 @@ class LiverSimNode {
     try {
       compliance_->factorize();
       analysis_springs_ = registration_->cloud_springs();  // those in the factor
+      analysis_factorised_at_ = ros::Time::now();
     } catch (const std::runtime_error& e) {
       ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", e.what());
     }
     return true;
   }
 
-  // The analysis's second frame: the solves on the factor of the frame before.
+  // The analysis's second frame: the solves on the factor of an earlier frame.
   void analyse_factorised() {
     const std::vector<SurfaceTarget> springs = std::move(*analysis_springs_);
     analysis_springs_.reset();
@@ -577,10 +578,10 @@ class LiverSimNode {
       for (const TargetUncertainty::Covariance& c : uncertainty_->covariances(*compliance_, springs))
         covariances_.push_back(c.total);
       display_due_ = true;
-      analysis_stamp_ = ros::Time::now();
-      const int held = registration_->estimate_supports(*compliance_);
+      analysis_stamp_ = analysis_factorised_at_;
+      const int held = registration_->estimate_supports(*compliance_, springs);
       if (held >= 0) ROS_INFO("liver_sim: the clouds call for candidate support %d: held from the next cloud", held);
-      registration_->estimate_tissue_stiffness(*compliance_);  // registration.max_tissue_stiffness_factor 1: off
+      registration_->estimate_tissue_stiffness(*compliance_, springs);  // registration.max_tissue_stiffness_factor 1: off
     } catch (const std::runtime_error& e) {
       ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", e.what());
     }
@@ -878,6 +879,7 @@ class LiverSimNode {
   std::optional<std::vector<SurfaceTarget>> analysis_springs_;  // set: an analysis's factor awaits its solves
   ros::WallTime next_analysis_;
   ros::WallTime analysis_gives_way_until_;  // zero: no part of the analysis is waiting
+  ros::Time analysis_factorised_at_;         // the state the pending solves describe
   ros::Time analysis_stamp_;
 
   // Shared with the heartbeat, under status_mutex_.

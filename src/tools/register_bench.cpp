@@ -359,8 +359,8 @@ int main(int argc, char** argv) {
                   const auto t0 = std::chrono::steady_clock::now();
                   compliance.factorize();
                   if (k == opt.frames) covariance = uncertainty.covariances(compliance, registration.cloud_springs());
-                  registration.estimate_supports(compliance);
-                  registration.estimate_tissue_stiffness(compliance);
+                  registration.estimate_supports(compliance, registration.cloud_springs());
+                  registration.estimate_tissue_stiffness(compliance, registration.cloud_springs());
                   analysis_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / runs;
                   analysis_cpu_ms += 1e3 * (std::clock() - c1) / CLOCKS_PER_SEC / runs;
                   frame_ms.push_back(frame.total_ms);
