@@ -331,7 +331,9 @@ std::vector<Case> cases() {
   for (double f : {0.125, 0.25, 0.5}) {
     std::ostringstream n;
     n << "top " << f * 100 << "% folded through (inverted start)";
-    v.push_back({"inversion", n.str(), {}, {}, fold_above(0.015 * (1 - f)), 1, false, f == 0.125 ? chaotic : stalls});
+    // The half folded through is in the reduced run: its stall ends about twice above its start
+    // merit, so a stall detector ten times too lax (mutation NS10) lets it through.
+    v.push_back({"inversion", n.str(), {}, {}, fold_above(0.015 * (1 - f)), 1, f == 0.5, f == 0.125 ? chaotic : stalls});
   }
   v.push_back({"inversion", "top 50% folded, dynamic dt = 5 ms, 10 steps", {"solver.mode=dynamic", "solver.dt=0.005"}, {},
                fold_above(0.0075), 10, false});
