@@ -292,12 +292,13 @@ class Soak:
         except EOFError:
             arrivals = []
         receiver.join(5)
-        self.receiver_exit = receiver.exitcode
         for t in threads:
             t.join(5)
-        return self.report(pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end, arrivals)
+        return self.report(pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end, arrivals,
+                           receiver.exitcode)
 
-    def report(self, pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end, arrivals):
+    def report(self, pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end, arrivals,
+               receiver_exit):
         # Between arrivals at the receiver of its own (receive_status), and between the node's
         # stamps (when it published).
         received = [t for t, _ in arrivals if t_start <= t <= t_end]
@@ -337,7 +338,7 @@ class Soak:
             "rss_mb": {"start": round(rss_start, 1), "end": round(rss_end, 1)},
             "status_messages": len(window),
             "status_messages_at_the_receiver": len(received),
-            "status_receiver_exit_code": self.receiver_exit,
+            "status_receiver_exit_code": receiver_exit,
             "status_max_gap_s": round(max(gaps), 3) if gaps else None,
             "status_gaps_over_two_frames": sum(1 for g in gaps if g > 2.0 / self.node_rate),
             "status_max_stamp_gap_s": round(max(stamp_gaps), 3) if stamp_gaps else None,

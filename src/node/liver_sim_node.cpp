@@ -295,13 +295,8 @@ class LiverSimNode {
       if (registered) return registered->step;
       if (!stepped) return StepResult();
       if (registering_) {
-        const RegistrationFrame f = registration_->refine();
-        registration_rms_ = f.rms;
-        correspondences_ = f.correspondences;  // a later update of the cloud may have moved them
-        registered_.coverage = f.coverage;
-        registered_.inlier_fraction = f.inlier_fraction;
-        registered_.rms_all = f.rms_all;
-        return f.step;
+        registered_ = registration_->refine();  // a later update of the cloud may have moved the fit
+        return registered_.step;
       }
       return model_->step();
     });
@@ -354,8 +349,6 @@ class LiverSimNode {
       instruments_->release_all(*model_);
       registering_ = false;
       clouds_registered_ = 0;
-      registration_rms_ = 0;
-      correspondences_ = 0;
       registered_ = RegistrationFrame();
       covariances_.clear();
       analysis_due_ = false;
@@ -525,8 +518,6 @@ class LiverSimNode {
       const RegistrationFrame f = registration_->register_cloud(cloud->points, cloud->viewpoint);
       if (f.step.status != StepResult::Status::Diverged) {  // rolled back: the state is the last one
         ++clouds_registered_;
-        registration_rms_ = f.rms;
-        correspondences_ = f.correspondences;
         registered_ = f;
         reflected_stamp_ = cloud->stamp;
       }
@@ -643,8 +634,8 @@ class LiverSimNode {
     s.max_displacement = model_->max_displacement();
     s.active_contacts = r.contacts;
     s.state = state_;
-    s.registration_rms = registration_rms_;
-    s.correspondences = correspondences_;
+    s.registration_rms = registered_.rms;
+    s.correspondences = registered_.correspondences;
     s.clouds_registered = clouds_registered_;
     s.registration_coverage = registered_.coverage;
     s.registration_inlier_fraction = registered_.inlier_fraction;
@@ -825,7 +816,7 @@ class LiverSimNode {
     stat.add("rejected inputs", rejected_);
     stat.add("point clouds received", clouds_);
     stat.add("point clouds registered", clouds_registered_);
-    stat.add("registration RMS (m)", registration_rms_);
+    stat.add("registration RMS (m)", registered_.rms);
     stat.add("registration coverage", registered_.coverage);
     stat.add("registration inlier fraction", registered_.inlier_fraction);
     stat.add("registration RMS of all points (m)", registered_.rms_all);
@@ -871,9 +862,7 @@ class LiverSimNode {
   Eigen::VectorXd reference_;  // m, 3 #V: the pre-operative equilibrium; empty until known
   uint64_t clouds_registered_ = 0;
   bool registering_ = false;  // the model is converging on the last cloud
-  double registration_rms_ = 0;
-  int correspondences_ = 0;
-  RegistrationFrame registered_;  // the last registered cloud's frame
+  RegistrationFrame registered_;  // the fit shown: the last registered cloud's, or its last refinement's
   std::vector<Eigen::Matrix3d> covariances_;  // of the targets, m^2, at the last analysis
   bool analysis_due_ = false;
   std::optional<std::vector<SurfaceTarget>> analysis_springs_;  // set: an analysis's factor awaits its solves
