@@ -478,19 +478,6 @@ TEST(PatientFrames, ThePhantomsRightLobeIsOnThePatientsRight) {
 
 // ---- meshing
 
-// The phantom's boundary (2,540 triangles) meshed twice: the same nodes and tetrahedra bit for
-// bit. gmsh 4.8 gave the same mesh here with a seed from the clock or on two threads (both tried,
-// both survived): the test guards the property against a newer gmsh or a change in the way the
-// mesh is taken out of it; scripts/make_model_check.sh compares the tool's files byte for byte.
-TEST(VolumeMeshing, SameSurfaceSameMeshTwice) {
-  const SurfaceMesh s = phantom_surface();
-  VolumeMeshOptions o;
-  o.target_elements = 3000;
-  const TetMesh a = mesh_volume(s, "phantom", o), b = mesh_volume(s, "phantom", o);
-  EXPECT_EQ(a.V, b.V);
-  EXPECT_EQ(a.T, b.T);
-}
-
 // The generated mesh in the model, with the capsule, attached at the bare area, under gravity
 // (supine): converges, and the supports carry the weight rho g V of the meshed volume exactly.
 // The mesh keeps the shape: its volume within 1.5% of the surface's, Hausdorff distance under
