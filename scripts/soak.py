@@ -7,7 +7,8 @@ set_capsule call out of range (alternately a modulus of -1 and of 1e300 Pa) and 
 command a radius of 1e9 m: the node must refuse and count them and keep going. Every 1000th pose
 jumps 3 cm across the lobe and back (the step stages the move). With the node's test hook
 ~test_fault_every set (soak.sh and soak.test set it), faults are injected into its steps
-(exceptions, allocation failures, NaN, negative pivots): each must be rolled back and counted.
+(exceptions, allocation failures, NaN, negative pivots): each must be rolled back and counted;
+and every fifth injection holds a step up for 0.3 s, which the node's heartbeat must cover.
 
 Reports: messages sent and handled, RSS of the node at start (after a warm-up) and end, status
 messages and the largest gap between them (heartbeats included: state "busy", sent while a frame
@@ -20,8 +21,8 @@ inputs. Every floating-point field of every message the node publishes on ~statu
 Exits 1 when a check fails. Checks that hold at any speed: the node is alive; ~status carries
 every step (its step counter never skips one, a reset starting it again); RSS grew by at most
 10% + 20 MB; nothing non-finite was published (every floating-point field of every message);
-the refused inputs counted match those sent; with injected faults, some were counted and the
-node went on stepping after each. Wall-clock checks: no ~status gap longer than two frames of
+the refused inputs counted match those sent; with injected faults, some were counted, the
+node went on stepping after each, and heartbeats ("busy") came while steps were held up. Wall-clock checks: no ~status gap longer than two frames of
 the node's rate, between arrivals at a process of its own that only receives ~status (this one
 builds clouds, which pauses its receivers) and between the node's stamps; the achieved frame
 rate at least 90% of that rate; the late latency at most twice the early one + 0.2 s. As a
@@ -374,6 +375,9 @@ class Soak:
                 + sent["huge_radii"] + 2,
             "injected faults counted, and the node stepped on after them":
                 self.fault_every == 0 or (r["faults"]["counted"] or 0) > 0 and steps_after_fault > 0,
+            # A held-up step lasts nine frames of 30 Hz: without the heartbeat, no "busy" at all
+            # (tried: the heartbeat disabled fails the 30 s rostest here, 0 busy of 530 statuses).
+            "heartbeats while the injected delays held steps up": self.fault_every == 0 or busy > 0,
             "no status gap above %g s" % self.max_gap: bool(gaps) and max(gaps) <= self.max_gap,
         }
         # Wall-clock checks: judged by the standalone soak (scripts/soak.sh, a quiet pinned

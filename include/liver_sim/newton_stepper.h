@@ -120,9 +120,13 @@ class NewtonStepper {
     Exception,           // std::runtime_error after the step's first Newton update
     OutOfMemory,         // std::bad_alloc there
     NonFinite,           // a NaN in the first Newton update: the non-finite detector fires
-    NotPositiveDefinite  // the step's first CHOLMOD factorisation gets a negative pivot: the
-                         // definiteness detector fires (strategies that factorise with CHOLMOD)
+    NotPositiveDefinite,  // the step's first CHOLMOD factorisation gets a negative pivot: the
+                          // definiteness detector fires (strategies that factorise with CHOLMOD)
+    Slow                  // the step's first Newton update held up for kInjectedDelay: a frame
+                          // far beyond its time budget, nothing to roll back (the node's
+                          // heartbeat must keep ~status going meanwhile)
   };
+  static constexpr std::chrono::milliseconds kInjectedDelay{300};
   void inject_fault(InjectedFault f) { fault_ = f; }
 
   // Force the supports exert on the tissue at the fixed DOFs (N; 0 elsewhere).

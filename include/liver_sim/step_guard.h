@@ -40,7 +40,7 @@ class StepGuard {
 
   // Test hook (the soak, ~test_fault_every): every n-th guarded step (0: never) meets an injected
   // fault (NewtonStepper::inject_fault), in turn an exception, an allocation failure, a NaN in the
-  // update and a negative pivot.
+  // update, a negative pivot and an update held up for 0.3 s.
   void set_test_fault_every(int n) { fault_every_ = n; }
 
  private:

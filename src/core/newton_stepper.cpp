@@ -6,6 +6,7 @@
 #include <new>
 #include <sstream>
 #include <stdexcept>
+#include <thread>
 
 namespace liver_sim {
 namespace {
@@ -553,6 +554,7 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     r_.swap(r_try_);
     if (take_fault(InjectedFault::Exception)) throw std::runtime_error("injected fault (test hook)");
     if (take_fault(InjectedFault::OutOfMemory)) throw std::bad_alloc();
+    if (take_fault(InjectedFault::Slow)) std::this_thread::sleep_for(kInjectedDelay);
     // Modified Newton keeps its factor while it contracts the residual well: with contacts, the
     // residual it was asked to zero, which carries the update's change of the contact forces
     // (a step that closes new gaps raises the residual it started from).

@@ -12,8 +12,9 @@ void StepGuard::inject(LiverModel& model) {
   ++guarded_steps_;
   if (fault_every_ <= 0 || guarded_steps_ % fault_every_ != 0) return;
   using Fault = NewtonStepper::InjectedFault;
-  static constexpr Fault kCycle[] = {Fault::Exception, Fault::OutOfMemory, Fault::NonFinite, Fault::NotPositiveDefinite};
-  model.stepper().inject_fault(kCycle[injected_++ % 4]);
+  static constexpr Fault kCycle[] = {Fault::Exception, Fault::OutOfMemory, Fault::NonFinite, Fault::NotPositiveDefinite,
+                                     Fault::Slow};
+  model.stepper().inject_fault(kCycle[injected_++ % 5]);
 }
 
 StepResult StepGuard::fault(const std::string& text) {
