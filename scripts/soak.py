@@ -22,9 +22,10 @@ Exits 1 when a check fails. Checks that hold at any speed: the node is alive; ~s
 every step (its step counter never skips one, a reset starting it again); RSS grew by at most
 10% + 20 MB; nothing non-finite was published (every floating-point field of every message);
 the refused inputs counted match those sent; with injected faults, some were counted, the
-node went on stepping after each, and heartbeats ("busy") came while steps were held up. Wall-clock checks: no ~status gap longer than two frames of
-the node's rate, between arrivals at a process of its own that only receives ~status (this one
-builds clouds, which pauses its receivers) and between the node's stamps; the achieved frame
+node went on stepping after each, and heartbeats ("busy") came while steps were held up.
+Wall-clock checks: no ~status gap longer than two frames of the node's rate, between arrivals
+at a process of its own that only receives ~status (this one builds clouds, which pauses its
+receivers) and between the node's stamps; the achieved frame
 rate at least 90% of that rate; the late latency at most twice the early one + 0.2 s. As a
 rostest (--rostest) only the checks that hold at any speed are asserted, and a gap bound it can
 judge on a shared machine: none above --max-gap seconds (the node's step time budget makes a

@@ -1,5 +1,7 @@
 #include "liver_sim/step_guard.h"
 
+#include <iterator>
+
 namespace liver_sim {
 
 void StepGuard::count(const std::string& text) {
@@ -14,7 +16,7 @@ void StepGuard::inject(LiverModel& model) {
   using Fault = NewtonStepper::InjectedFault;
   static constexpr Fault kCycle[] = {Fault::Exception, Fault::OutOfMemory, Fault::NonFinite, Fault::NotPositiveDefinite,
                                      Fault::Slow};
-  model.stepper().inject_fault(kCycle[injected_++ % 5]);
+  model.stepper().inject_fault(kCycle[injected_++ % std::size(kCycle)]);
 }
 
 StepResult StepGuard::fault(const std::string& text) {
