@@ -27,7 +27,8 @@ Wall-clock checks: no ~status gap longer than two frames of the node's rate, bet
 at a process of its own that only receives ~status (this one builds clouds, which pauses its
 receivers) and between the node's stamps; the achieved frame rate at least 90% of that rate;
 the late latency at most twice the early one + 0.2 s. As a rostest (--rostest) only the checks
-that hold at any speed are asserted, and a gap bound it can judge on a shared machine: none above --max-gap seconds (the node's step time budget makes a
+that hold at any speed are asserted, and a gap bound it can judge on a shared machine: none
+above --max-gap seconds (the node's step time budget makes a
 frame at most one Newton iteration and one stage long, about 0.7 s on the phantom with contact;
 a loop that hangs or a step that runs its 16 stages through goes far beyond); the others are
 printed.
