@@ -2,8 +2,8 @@
 //
 // Each frame: the cloud (model frame, m) is cropped to the model's neighbourhood, downsampled on
 // a voxel grid, optionally moved by a rigid alignment found once with PCL's ICP; then, a few
-// times, every point finds its closest point on the boundary triangles (a kd-tree over the
-// triangle centroids, then exact point-triangle distances), far points are rejected (distance
+// times, every point finds its closest point on the boundary triangles (SurfaceLocator, exact),
+// far points are rejected (distance
 // gate, then trimming), the rest are weighted (Huber), and they pull the surface through
 // springs (LiverModel::set_surface_targets) while the model solves its equilibrium, starting
 // from the last frame's state. The springs stay until the next cloud, so the model keeps the
@@ -11,7 +11,6 @@
 // and vessels.
 #pragma once
 
-#include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 
@@ -27,6 +26,7 @@
 #include "liver_sim/closest_points.h"
 #include "liver_sim/liver_model.h"
 #include "liver_sim/state_compliance.h"
+#include "liver_sim/surface_locator.h"
 #include "liver_sim/surface_patches.h"
 
 namespace liver_sim {
@@ -41,43 +41,6 @@ struct TrackedTarget {
 // The scene's probes (the tumour) and the vessel nodes where three or more beams meet
 // (bifurcations, named "<vessel> bifurcation <node>"), at the model's current state.
 std::vector<TrackedTarget> tracked_targets(const LiverModel& model);
-
-// Closest points on a triangulated surface.
-class SurfaceLocator {
- public:
-  struct Hit {
-    int triangle = -1;
-    Eigen::Vector3d weights = Eigen::Vector3d::Zero();  // barycentric of the closest point
-    Eigen::Vector3d point = Eigen::Vector3d::Zero();    // m
-    Eigen::Vector3d normal = Eigen::Vector3d::Zero();   // the triangle's outward unit normal
-    double distance = 0;                                // m
-  };
-  // The triangles `boundary` (rows: node indices into x, 3 per node) at positions x; with a
-  // viewpoint, only those whose front faces it (a camera sees no back face).
-  void build(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary,
-             const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
-  // Exact: the triangles of the nearest centroids are tested; when a triangle farther out could
-  // still be closer (its centroid within the best distance plus the largest centroid-to-vertex
-  // distance), every triangle within that radius is. Safe to call from several threads.
-  // With `candidates`, also returns the triangles tested (indices of this locator). With a
-  // `cutoff` (m), exact only for a point within it of the surface: a farther point's hit is
-  // some triangle farther than the cutoff (a gate then drops it without a wide search).
-  Hit closest(const Eigen::Vector3d& p, std::vector<int>* candidates = nullptr,
-              double cutoff = std::numeric_limits<double>::infinity()) const;
-  // The best of earlier candidates, at the positions of the last refresh (no tree search).
-  Hit closest_among(const Eigen::Vector3d& p, const std::vector<int>& candidates) const;
-  // The same triangles at new positions x (the tree keeps the old centroids: use closest_among).
-  void refresh(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary);
-  bool empty() const { return triangles_.empty(); }
-
- private:
-  std::vector<int> triangles_;               // rows of the boundary kept
-  std::vector<Eigen::Matrix3d> corners_;     // columns: the triangle's vertices
-  double reach_ = 0;                         // largest centroid-to-vertex distance
-  pcl::PointCloud<pcl::PointXYZ>::Ptr centroids_;
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree_;
-};
-
 
 // Points an incoming cloud may hold before its preparation: a 5-megapixel structured-light
 // camera gives 5e6; the preparation copies the cloud twice, so ten million points cost about
@@ -190,10 +153,10 @@ class SurfaceRegistration {
   int filter(const pcl::PointCloud<pcl::PointXYZ>& cloud);
   void align_rigidly();
   // Correspondences at the model's current state into targets_ (the model is not touched), with
-  // the frame's inlier fraction, coverage and stiffness scale; returns their number. The first
-  // update of a frame searches the tree; later ones, after the surface moved a little, test the
-  // triangles that search found near each point.
-  int find_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint, RegistrationFrame& frame);
+  // the frame's inlier fraction, coverage and stiffness scale; returns their number. A new
+  // cloud's first update builds the locator on the triangles that face the viewpoint; later
+  // ones refit it to the surface's new positions.
+  int find_correspondences(bool new_cloud, const std::optional<Eigen::Vector3d>& viewpoint, RegistrationFrame& frame);
   // Why the accepted points cannot act ("" when they can).
   std::string unsupported(int accepted, double coverage) const;
   double spring_rms() const;
@@ -202,7 +165,7 @@ class SurfaceRegistration {
   double systematic_pull(const std::vector<SurfaceTarget>& springs, const Eigen::VectorXd& x) const;
   // The cloud's springs plus those of the held supports, to the model.
   void apply_springs();
-  // RegistrationFrame::rms_all at the model's current state (the last update's candidates).
+  // RegistrationFrame::rms_all at the model's current state.
   double all_points_rms();
   // One model step with the registration's strategy and iteration cap; adds to the frame.
   void solve(RegistrationFrame& frame);
@@ -221,7 +184,6 @@ class SurfaceRegistration {
   std::vector<SurfaceTarget> targets_;  // of the last update
   SurfaceLocator locator_;
   std::vector<SurfaceLocator::Hit> hits_;
-  std::vector<std::vector<int>> candidates_;  // per point: the triangles its frame's search tested
   std::vector<std::pair<double, int>> ranked_;
   std::vector<char> covered_;  // per boundary triangle: holds an accepted point
   RegistrationFrame last_;     // of the last registered cloud (refine reports its support)

@@ -42,68 +42,6 @@ std::vector<TrackedTarget> tracked_targets(const LiverModel& model) {
   return targets;
 }
 
-void SurfaceLocator::build(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary,
-                           const std::optional<Eigen::Vector3d>& viewpoint) {
-  triangles_.clear();
-  corners_.clear();
-  reach_ = 0;
-  centroids_.reset(new pcl::PointCloud<pcl::PointXYZ>);
-  for (int t = 0; t < boundary.rows(); ++t) {
-    Eigen::Matrix3d v;
-    for (int j = 0; j < 3; ++j) v.col(j) = node(x, boundary(t, j));
-    const Eigen::Vector3d centroid = v.rowwise().mean();
-    if (viewpoint && (v.col(1) - v.col(0)).cross(v.col(2) - v.col(0)).dot(*viewpoint - centroid) <= 0) continue;
-    triangles_.push_back(t);
-    corners_.push_back(v);
-    for (int j = 0; j < 3; ++j) reach_ = std::max(reach_, (v.col(j) - centroid).norm());
-    centroids_->push_back(pcl::PointXYZ(centroid.x(), centroid.y(), centroid.z()));
-  }
-  if (!triangles_.empty()) tree_.setInputCloud(centroids_);
-}
-
-void SurfaceLocator::refresh(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary) {
-  for (size_t k = 0; k < triangles_.size(); ++k)
-    for (int j = 0; j < 3; ++j) corners_[k].col(j) = node(x, boundary(triangles_[k], j));
-}
-
-SurfaceLocator::Hit SurfaceLocator::closest_among(const Eigen::Vector3d& p, const std::vector<int>& candidates) const {
-  Hit best;
-  best.distance = std::numeric_limits<double>::infinity();
-  for (int k : candidates) {
-    const Eigen::Matrix3d& v = corners_[k];
-    const Eigen::Vector3d w = closest_on_triangle(p, v.col(0), v.col(1), v.col(2));
-    const Eigen::Vector3d c = v * w;
-    const double d = (p - c).norm();
-    if (d < best.distance) {
-      best.distance = d;
-      best.triangle = triangles_[k];
-      best.weights = w;
-      best.point = c;
-      best.normal = (v.col(1) - v.col(0)).cross(v.col(2) - v.col(0)).normalized();
-    }
-  }
-  return best;
-}
-
-SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, std::vector<int>* candidates, double cutoff) const {
-  std::vector<int> found;
-  std::vector<float> squared;
-  if (triangles_.empty()) return closest_among(p, found);
-  const pcl::PointXYZ q(p.x(), p.y(), p.z());
-  constexpr int kNearest = 8;
-  const int n = tree_.nearestKSearch(q, kNearest, found, squared);
-  Hit best = closest_among(p, found);
-  // Float centroids: a little slack keeps the bound safe. A triangle nearer than the cutoff has
-  // its centroid within cutoff + reach: none farther needs testing.
-  const double bound = std::min(best.distance, cutoff) + reach_ + 1e-6;
-  if (n == kNearest && std::sqrt(squared.back()) < bound) {
-    tree_.radiusSearch(q, bound, found, squared);
-    best = closest_among(p, found);
-  }
-  if (candidates) candidates->swap(found);
-  return best;
-}
-
 SurfaceRegistration::SurfaceRegistration(LiverModel& model, const RegistrationOptions& options)
     : model_(model),
       options_(options),
@@ -344,22 +282,17 @@ void SurfaceRegistration::align_rigidly() {
   align_requested_ = false;
 }
 
-int SurfaceRegistration::find_correspondences(bool search, const std::optional<Eigen::Vector3d>& viewpoint,
+int SurfaceRegistration::find_correspondences(bool new_cloud, const std::optional<Eigen::Vector3d>& viewpoint,
                                               RegistrationFrame& frame) {
   const int n = static_cast<int>(points_->size());
   hits_.resize(n);
-  if (search) {
+  if (new_cloud)
     locator_.build(model_.positions(), model_.boundary(), viewpoint);
-    candidates_.resize(n);
-  } else {
+  else
     locator_.refresh(model_.positions(), model_.boundary());
-  }
-#pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     const pcl::PointXYZ& q = (*points_)[i];
-    const Eigen::Vector3d p(q.x, q.y, q.z);
-    hits_[i] = search ? locator_.closest(p, &candidates_[i], options_.max_distance)
-                      : locator_.closest_among(p, candidates_[i]);
+    hits_[i] = locator_.closest(Eigen::Vector3d(q.x, q.y, q.z), options_.max_distance);
   }
   ranked_.clear();
   for (int i = 0; i < n; ++i)
@@ -411,12 +344,12 @@ std::string SurfaceRegistration::unsupported(int accepted, double coverage) cons
 
 double SurfaceRegistration::all_points_rms() {
   const int n = static_cast<int>(points_->size());
-  if (n == 0 || static_cast<int>(candidates_.size()) != n) return 0.0;
+  if (n == 0 || locator_.empty()) return 0.0;
   locator_.refresh(model_.positions(), model_.boundary());
   double sum = 0;
   for (int i = 0; i < n; ++i) {
     const pcl::PointXYZ& q = (*points_)[i];
-    const double d = locator_.closest_among(Eigen::Vector3d(q.x, q.y, q.z), candidates_[i]).distance;
+    const double d = locator_.closest(Eigen::Vector3d(q.x, q.y, q.z), options_.max_distance).distance;
     sum += std::pow(std::min(d, options_.max_distance), 2);
   }
   return std::sqrt(sum / n);
