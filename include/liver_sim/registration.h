@@ -160,6 +160,13 @@ class SurfaceRegistration {
   // Why the accepted points cannot act ("" when they can).
   std::string unsupported(int accepted, double coverage) const;
   double spring_rms() const;
+  // How far a surface point has moved at most since hits_ were searched (the largest node
+  // motion; infinite when they are not of points_).
+  double surface_motion() const;
+  // Whether a point whose last hit was beyond max_distance still is after the surface moved
+  // `moved` (then it need not be searched again). Points near the surface start their search
+  // from their last hit's triangle.
+  bool still_beyond(const SurfaceLocator::Hit& hit, double moved) const;
   // The springs' systematic pull at positions x (N^2): the sum over the surface patches of their
   // net spring force squared (the sensor's noise cancels within a patch, a model error does not).
   double systematic_pull(const std::vector<SurfaceTarget>& springs, const Eigen::VectorXd& x) const;
@@ -183,7 +190,8 @@ class SurfaceRegistration {
   pcl::PointCloud<pcl::PointXYZ>::Ptr points_, previous_points_;  // this frame's, the last accepted frame's while filtering
   std::vector<SurfaceTarget> targets_;  // of the last update
   SurfaceLocator locator_;
-  std::vector<SurfaceLocator::Hit> hits_;
+  std::vector<SurfaceLocator::Hit> hits_;  // of points_, at the positions searched_at_
+  Eigen::VectorXd searched_at_;            // empty: hits_ are not of points_
   std::vector<std::pair<double, int>> ranked_;
   std::vector<char> covered_;  // per boundary triangle: holds an accepted point
   RegistrationFrame last_;     // of the last registered cloud (refine reports its support)

@@ -15,11 +15,11 @@ namespace liver_sim {
 class SurfaceLocator {
  public:
   struct Hit {
-    int triangle = -1;  // row of the boundary; -1: no triangle within the cutoff
+    int triangle = -1;  // row of the boundary; -1: none within the cutoff
     Eigen::Vector3d weights = Eigen::Vector3d::Zero();  // barycentric of the closest point
     Eigen::Vector3d point = Eigen::Vector3d::Zero();    // m
     Eigen::Vector3d normal = Eigen::Vector3d::Zero();   // the triangle's outward unit normal
-    double distance = std::numeric_limits<double>::infinity();  // m
+    double distance = std::numeric_limits<double>::infinity();  // m; with no triangle, a lower bound
   };
   // The triangles `boundary` (rows: node indices into x, 3 per node) at positions x; with a
   // viewpoint, only those whose front faces it (a camera sees no back face).
@@ -29,9 +29,11 @@ class SurfaceLocator {
   // only its pruning weakens as the surface moves far from the shape it was built on).
   void refresh(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary);
   // The closest point of the triangles to p, exact. With a cutoff (m), only triangles within it
-  // are looked at: a point farther than the cutoff from all of them gets no triangle. Safe to
-  // call from several threads.
-  Hit closest(const Eigen::Vector3d& p, double cutoff = std::numeric_limits<double>::infinity()) const;
+  // are looked at: a point farther than the cutoff from all of them gets no triangle, and as
+  // its distance a lower bound of it (above the cutoff). A `hint` (a boundary row, e.g. the
+  // point's last hit) that is near narrows the search from the start. Safe to call from several
+  // threads.
+  Hit closest(const Eigen::Vector3d& p, double cutoff = std::numeric_limits<double>::infinity(), int hint = -1) const;
   bool empty() const { return triangles_.empty(); }
 
  private:
@@ -44,6 +46,7 @@ class SurfaceLocator {
   void fit(int box);
 
   std::vector<int> triangles_;            // rows of the boundary kept
+  std::vector<int> slot_of_row_;          // per boundary row: its index in triangles_, or -1
   std::vector<Eigen::Matrix3d> corners_;  // per kept triangle, columns: its vertices
   std::vector<int> order_;                // kept triangles in leaf order
   std::vector<Box> boxes_;                // depth first: every child after its parent

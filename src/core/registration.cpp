@@ -286,14 +286,23 @@ int SurfaceRegistration::find_correspondences(bool new_cloud, const std::optiona
                                               RegistrationFrame& frame) {
   const int n = static_cast<int>(points_->size());
   hits_.resize(n);
-  if (new_cloud)
+  if (new_cloud) {
+    searched_at_.resize(0);
     locator_.build(model_.positions(), model_.boundary(), viewpoint);
-  else
+  } else {
     locator_.refresh(model_.positions(), model_.boundary());
-  for (int i = 0; i < n; ++i) {
-    const pcl::PointXYZ& q = (*points_)[i];
-    hits_[i] = locator_.closest(Eigen::Vector3d(q.x, q.y, q.z), options_.max_distance);
   }
+  const double moved = surface_motion();
+  const bool hits_known = std::isfinite(moved);  // the last search was of these points
+  for (int i = 0; i < n; ++i) {
+    if (hits_known && still_beyond(hits_[i], moved)) {
+      hits_[i].distance -= moved;  // still a lower bound
+      continue;
+    }
+    const pcl::PointXYZ& q = (*points_)[i];
+    hits_[i] = locator_.closest(Eigen::Vector3d(q.x, q.y, q.z), options_.max_distance, hits_known ? hits_[i].triangle : -1);
+  }
+  searched_at_ = model_.positions();
   ranked_.clear();
   for (int i = 0; i < n; ++i)
     if (hits_[i].distance <= options_.max_distance) ranked_.emplace_back(hits_[i].distance, i);
@@ -346,13 +355,30 @@ double SurfaceRegistration::all_points_rms() {
   const int n = static_cast<int>(points_->size());
   if (n == 0 || locator_.empty()) return 0.0;
   locator_.refresh(model_.positions(), model_.boundary());
+  const double moved = surface_motion();
+  const bool hits_known = std::isfinite(moved);  // hits_ are of these points
   double sum = 0;
   for (int i = 0; i < n; ++i) {
+    if (hits_known && still_beyond(hits_[i], moved)) {
+      sum += std::pow(options_.max_distance, 2);
+      continue;
+    }
     const pcl::PointXYZ& q = (*points_)[i];
-    const double d = locator_.closest(Eigen::Vector3d(q.x, q.y, q.z), options_.max_distance).distance;
+    const int hint = hits_known ? hits_[i].triangle : -1;
+    const double d = locator_.closest(Eigen::Vector3d(q.x, q.y, q.z), options_.max_distance, hint).distance;
     sum += std::pow(std::min(d, options_.max_distance), 2);
   }
   return std::sqrt(sum / n);
+}
+
+double SurfaceRegistration::surface_motion() const {
+  const Eigen::VectorXd& x = model_.positions();
+  if (searched_at_.size() != x.size() || hits_.size() != points_->size()) return std::numeric_limits<double>::infinity();
+  return (x - searched_at_).reshaped(3, x.size() / 3).colwise().norm().maxCoeff();
+}
+
+bool SurfaceRegistration::still_beyond(const SurfaceLocator::Hit& hit, double moved) const {
+  return hit.triangle < 0 && hit.distance - moved > options_.max_distance;
 }
 
 double SurfaceRegistration::spring_rms() const {
@@ -389,6 +415,7 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   const bool was_aligned = aligned_, was_requested = align_requested_;
   auto refuse = [&](const std::string& why) {
     points_.swap(previous_points_);
+    searched_at_.resize(0);  // the hits are this cloud's
     alignment_ = previous_alignment;
     aligned_ = was_aligned;
     align_requested_ = was_requested;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 
 #include "liver_sim/closest_points.h"
 
@@ -19,12 +20,14 @@ void SurfaceLocator::build(const Eigen::VectorXd& x, const Eigen::MatrixX3i& bou
   triangles_.clear();
   corners_.clear();
   boxes_.clear();
+  slot_of_row_.assign(boundary.rows(), -1);
   std::vector<Eigen::Vector3d> centroids;
   for (int t = 0; t < boundary.rows(); ++t) {
     Eigen::Matrix3d v;
     for (int j = 0; j < 3; ++j) v.col(j) = node(x, boundary(t, j));
     const Eigen::Vector3d centroid = v.rowwise().mean();
     if (viewpoint && (v.col(1) - v.col(0)).cross(v.col(2) - v.col(0)).dot(*viewpoint - centroid) <= 0) continue;
+    slot_of_row_[t] = static_cast<int>(triangles_.size());
     triangles_.push_back(t);
     corners_.push_back(v);
     centroids.push_back(centroid);
@@ -75,19 +78,34 @@ void SurfaceLocator::refresh(const Eigen::VectorXd& x, const Eigen::MatrixX3i& b
   for (int b = static_cast<int>(boxes_.size()) - 1; b >= 0; --b) fit(b);  // children first
 }
 
-SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, double cutoff) const {
+SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, double cutoff, int hint) const {
   Hit best;
   if (boxes_.empty()) return best;
   double bound = cutoff * cutoff;  // squared: nothing farther is looked at
+  double beyond = std::numeric_limits<double>::infinity();  // squared: the nearest of what was not
   int found = -1;
   Eigen::Vector3d weights;
+  if (hint >= 0 && hint < static_cast<int>(slot_of_row_.size()) && slot_of_row_[hint] >= 0) {
+    const Eigen::Matrix3d& v = corners_[slot_of_row_[hint]];
+    const Eigen::Vector3d w = closest_on_triangle(p, v.col(0), v.col(1), v.col(2));
+    const double d2 = (p - v * w).squaredNorm();
+    if (d2 <= bound) {
+      bound = d2;
+      found = slot_of_row_[hint];
+      weights = w;
+    }
+  }
   // Depth first, the nearer child first; a median-split tree is at most log2(triangles) deep.
   std::array<int, 64> stack;
   int top = 0;
   stack[top++] = 0;
   while (top > 0) {
     const Box& box = boxes_[stack[--top]];
-    if (box.bounds.squaredExteriorDistance(p) > bound) continue;
+    const double to_box = box.bounds.squaredExteriorDistance(p);
+    if (to_box > bound) {
+      beyond = std::min(beyond, to_box);
+      continue;
+    }
     if (box.count > 0) {
       for (int k = box.first; k < box.first + box.count; ++k) {
         const Eigen::Matrix3d& v = corners_[order_[k]];
@@ -97,6 +115,8 @@ SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, double cut
           bound = d2;
           found = order_[k];
           weights = w;
+        } else {
+          beyond = std::min(beyond, d2);
         }
       }
       continue;
@@ -108,7 +128,10 @@ SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, double cut
     stack[top++] = left_first ? box.right : left;
     stack[top++] = left_first ? left : box.right;
   }
-  if (found < 0) return best;
+  if (found < 0) {
+    best.distance = std::sqrt(beyond);  // every triangle is at least this far
+    return best;
+  }
   const Eigen::Matrix3d& v = corners_[found];
   best.triangle = triangles_[found];
   best.weights = weights;
