@@ -37,6 +37,7 @@
 #include "liver_sim/registration.h"
 #include "liver_sim/step_guard.h"
 #include "liver_sim/target_uncertainty.h"
+#include "liver_sim/uncertainty_worker.h"
 #include "liver_sim/worker_pool.h"
 #include "mesh_marker.h"
 #include "ros_instruments.h"
@@ -121,8 +122,8 @@ class LiverSimNode {
     }
     capsule_ = scene.capsule;
     registration_ = std::make_unique<SurfaceRegistration>(*model_, scene.registration);
-    uncertainty_ = std::make_unique<TargetUncertainty>(*model_, scene.registration.uncertainty);
-    compliance_ = std::make_unique<StateCompliance>(*model_);
+    analysis_ = std::make_unique<UncertaintyWorker>(std::make_unique<LiverModel>(load_scene_mesh(scene), scene),
+                                                    scene.registration.uncertainty);
     pnh.param("uncertainty_period", uncertainty_period_, 1.0);
     if (!(uncertainty_period_ >= 0)) throw std::invalid_argument("~uncertainty_period must be >= 0");
     // Clouds are cropped in the callback to the rest shape's box grown by the registration's
@@ -280,14 +281,14 @@ class LiverSimNode {
     ROS_ERROR_THROTTLE(1.0, "liver_sim: fault %s; the model keeps its last good state", text.c_str());
   }
 
-  // One frame's simulation: the latest cloud registered, the registration's analysis, a step,
-  // all behind the barrier (step_guard.h). Returns whether the next frame must step.
+  // One frame's simulation: the registration's last analysis adopted, the latest cloud
+  // registered, a step, all behind the barrier (step_guard.h); then the next analysis started.
+  // Returns whether the next frame must step.
   bool simulate_frame(bool must_step) {
     bool stepped = false;
     const StepResult r = guard_.step(*model_, [&] {
-      // A part of the registration's analysis runs only in a frame without a pending cloud.
-      std::optional<RegistrationFrame> registered;
-      if (!analyse_registration()) registered = register_pending_cloud();
+      adopt_analysis();
+      std::optional<RegistrationFrame> registered = register_pending_cloud();
       if (registered) registering_ = analysis_due_ = true;
       stepped = registered || must_step;
       // While clouds come, the model converges on the last one in the registration's short
@@ -312,9 +313,11 @@ class LiverSimNode {
     }
     if (!stepped) {
       if (state_ != "diverged" && state_ != "fault") state_ = "idle";
+      start_analysis();  // one due while the last ran
       return false;
     }
     if (r.status != StepResult::Status::NotConverged && !registration_->updates_pending()) registering_ = false;
+    if (r.status != StepResult::Status::Diverged) start_analysis();
     ++steps_;
     step_times_.push_back(ros::WallTime::now());
     last_ = r;
@@ -352,15 +355,16 @@ class LiverSimNode {
       registered_ = RegistrationFrame();
       covariances_.clear();
       analysis_due_ = false;
-      analysis_springs_.reset();
-      analysis_gives_way_until_ = ros::WallTime();
+      ++resets_;  // an analysis still running describes the state before
       steps_ = 0;
       reflected_stamp_ = ros::Time();
     }
     if (capsule) {
       const std::string error = model_->set_capsule(*capsule);  // validated already
-      if (error.empty()) capsule_ = *capsule;
-      else ROS_ERROR("liver_sim: capsule change failed: %s", error.c_str());
+      if (error.empty()) {
+        capsule_ = *capsule;
+        analysis_->set_capsule(*capsule);
+      } else ROS_ERROR("liver_sim: capsule change failed: %s", error.c_str());
     }
     if (config) changed |= reconfigure(*config, loop);
     if (instruments_->apply(*model_)) {
@@ -529,52 +533,44 @@ class LiverSimNode {
   }
 
   // At most once per ~uncertainty_period, after a cloud was registered: the targets'
-  // covariances and the candidate supports the clouds call for (one factorisation of the
-  // registered model's stiffness serves both). The factorisation and the solves take a frame
-  // each, so that neither frame carries both. Each gives way to a pending cloud (held back, the
-  // cloud would be lost to the next one) for at most one period, so that clouds faster than the
-  // loop do not starve it; the solves use the springs of the factorised state, whatever clouds
-  // came between. Returns whether this frame ran a part of it. (simulation thread)
-  bool analyse_registration() {
+  // covariances and the candidate supports the clouds call for, from one factorisation of the
+  // registered model's stiffness, on the analysis's own thread (uncertainty_worker.h) while the
+  // frames go on. One runs at a time; a cloud registered meanwhile is analysed after it.
+  // (simulation thread, after a step that kept its state)
+  void start_analysis() {
     const ros::WallTime now = ros::WallTime::now();
-    if (!analysis_springs_ && (!analysis_due_ || now < next_analysis_)) return false;
-    if (analysis_gives_way_until_.isZero()) analysis_gives_way_until_ = now + ros::WallDuration(uncertainty_period_);
-    if (now < analysis_gives_way_until_) {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (pending_cloud_) return false;
-    }
-    analysis_gives_way_until_ = ros::WallTime();
-    if (analysis_springs_) {
-      analyse_factorised();
-      return true;
-    }
-    next_analysis_ = now + ros::WallDuration(uncertainty_period_);
-    analysis_due_ = false;
+    if (!analysis_due_ || now < next_analysis_) return;
     try {
-      compliance_->factorize();
-      analysis_springs_ = registration_->cloud_springs();  // those in the factor
-      analysis_factorised_at_ = ros::Time::now();
-    } catch (const std::runtime_error& e) {
+      if (!analysis_->start(*model_, registration_->cloud_springs(), resets_)) return;
+    } catch (const std::exception& e) {  // out of memory copying the state
       ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", e.what());
+      return;
     }
-    return true;
+    analysis_due_ = false;
+    next_analysis_ = now + ros::WallDuration(uncertainty_period_);
+    analysis_started_at_ = ros::Time::now();
   }
 
-  // The analysis's second frame: the solves on the factor of an earlier frame.
-  void analyse_factorised() {
-    const std::vector<SurfaceTarget> springs = std::move(*analysis_springs_);
-    analysis_springs_.reset();
+  // A finished analysis, if one is: its covariances shown, and the registration's estimates
+  // (candidate supports, the tissue's stiffness) solved on its factor with the springs it was
+  // made with. (simulation thread)
+  void adopt_analysis() {
+    std::optional<UncertaintyWorker::Result> result = analysis_->take();
+    if (!result || result->tag != resets_) return;
+    if (!result->error.empty()) {
+      ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", result->error.c_str());
+      return;
+    }
+    covariances_.clear();
+    for (const TargetUncertainty::Covariance& c : result->covariances) covariances_.push_back(c.total);
+    display_due_ = true;
+    analysis_stamp_ = analysis_started_at_;
     try {
-      covariances_.clear();
-      for (const TargetUncertainty::Covariance& c : uncertainty_->covariances(*compliance_, springs))
-        covariances_.push_back(c.total);
-      display_due_ = true;
-      analysis_stamp_ = analysis_factorised_at_;
-      const int held = registration_->estimate_supports(*compliance_, springs);
+      const int held = registration_->estimate_supports(analysis_->compliance(), result->cloud_springs);
       if (held >= 0) ROS_INFO("liver_sim: the clouds call for candidate support %d: held from the next cloud", held);
-      registration_->estimate_tissue_stiffness(*compliance_, springs);  // registration.max_tissue_stiffness_factor 1: off
+      registration_->estimate_tissue_stiffness(analysis_->compliance(), result->cloud_springs);  // registration.max_tissue_stiffness_factor 1: off
     } catch (const std::runtime_error& e) {
-      ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", e.what());
+      ROS_WARN_THROTTLE(5.0, "liver_sim: no support or stiffness estimate: %s", e.what());
     }
   }
 
@@ -839,8 +835,7 @@ class LiverSimNode {
   ros::Publisher mesh_pub_, vessel_pub_, status_pub_, target_marker_pub_, target_pose_pub_;
   ros::Publisher covariance_pub_, ellipsoid_pub_;
   std::unique_ptr<SurfaceRegistration> registration_;
-  std::unique_ptr<TargetUncertainty> uncertainty_;
-  std::unique_ptr<StateCompliance> compliance_;
+  std::unique_ptr<UncertaintyWorker> analysis_;
   double uncertainty_period_ = 1.0;  // s
   double cloud_margin_ = 0.05;  // m
   Eigen::AlignedBox3d cloud_box_;  // model frame: where cloud points can matter
@@ -864,12 +859,11 @@ class LiverSimNode {
   bool registering_ = false;  // the model is converging on the last cloud
   RegistrationFrame registered_;  // the fit shown: the last registered cloud's, or its last refinement's
   std::vector<Eigen::Matrix3d> covariances_;  // of the targets, m^2, at the last analysis
-  bool analysis_due_ = false;
-  std::optional<std::vector<SurfaceTarget>> analysis_springs_;  // set: an analysis's factor awaits its solves
+  bool analysis_due_ = false;  // a cloud was registered since the last analysis started
   ros::WallTime next_analysis_;
-  ros::WallTime analysis_gives_way_until_;  // zero: no part of the analysis is waiting
-  ros::Time analysis_factorised_at_;         // the state the pending solves describe
-  ros::Time analysis_stamp_;
+  ros::Time analysis_started_at_;  // the state the running analysis describes
+  ros::Time analysis_stamp_;       // the state covariances_ describe
+  uint64_t resets_ = 0;
 
   // Shared with the heartbeat, under status_mutex_.
   std::mutex status_mutex_;

@@ -1,0 +1,73 @@
+// The targets' uncertainty analysis (target_uncertainty.h) on a thread of its own, ROS-free: its
+// factorisation and solves (about 80 ms of CPU on the phantom at a depth camera's density) then
+// hold up no frame of the simulation. The caller hands over the registered state and takes the
+// covariances when they are ready; meanwhile its frames go on.
+//
+// The thread works on a model of its own (the same mesh and scene as the caller's), brought to
+// the state handed over: positions, the springs, the tissue's stiffness factor and the capsule,
+// all that the static stiffness K + springs depends on. It runs at a lower priority (nice
+// +10): where it shares a core with the simulation, the frames come first, and still it gets
+// about a tenth of a core that other programs keep busy.
+#pragma once
+
+#include <condition_variable>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "liver_sim/liver_model.h"
+#include "liver_sim/state_compliance.h"
+#include "liver_sim/target_uncertainty.h"
+
+namespace liver_sim {
+
+class UncertaintyWorker {
+ public:
+  // `model`: the worker's own, built from the caller's mesh and scene and not yet stepped.
+  // Throws std::invalid_argument for invalid options.
+  UncertaintyWorker(std::unique_ptr<LiverModel> model, const UncertaintyOptions& options);
+  ~UncertaintyWorker();
+  UncertaintyWorker(const UncertaintyWorker&) = delete;
+  UncertaintyWorker& operator=(const UncertaintyWorker&) = delete;
+
+  // The capsule of the models analysed from the next start() on (the caller's changed).
+  void set_capsule(const CapsuleOptions& capsule);
+
+  // Starts the analysis of `model`'s current state. `cloud_springs`: the cloud's springs among
+  // the model's (SurfaceRegistration::cloud_springs); `tag`: the caller's, returned with the
+  // result. Returns false, starting nothing, while an analysis runs or its result awaits take().
+  bool start(const LiverModel& model, std::vector<SurfaceTarget> cloud_springs, uint64_t tag);
+
+  struct Result {
+    uint64_t tag = 0;
+    std::vector<TargetUncertainty::Covariance> covariances;  // of tracked_targets, in order; empty on error
+    std::vector<SurfaceTarget> cloud_springs;                  // those handed to start()
+    std::string error;  // why there are no covariances (a stiffness not positive definite, ...)
+  };
+  // The finished analysis, once; nothing while it runs or when none was started.
+  std::optional<Result> take();
+
+  // The factor of the analysis last taken, until the next start(): the registration's estimates
+  // (candidate supports, the tissue's stiffness) solve with it.
+  StateCompliance& compliance() { return compliance_; }
+
+ private:
+  void run();
+
+  std::unique_ptr<LiverModel> model_;
+  StateCompliance compliance_;
+  TargetUncertainty uncertainty_;
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  enum class State { Idle, Running, Done } state_ = State::Idle;
+  bool stop_ = false;
+  std::optional<CapsuleOptions> capsule_;  // to apply at the next start()
+  Result job_;
+  std::thread thread_;  // last: started once the rest is built
+};
+
+}  // namespace liver_sim
