@@ -355,26 +355,16 @@ TEST(PhantomRegistration, PointsBeyondTheGateAreFoundOnceTheSurfaceComesNear) {
     cloud.push_back(pcl::PointXYZ(far.x(), far.y(), far.z()));
     ++inliers;
   }
-  // Brute force over every triangle at positions x.
-  auto brute = [&](const Eigen::Vector3d& p, const Eigen::VectorXd& x) {
-    double best = std::numeric_limits<double>::infinity();
-    for (int t = 0; t < F.rows(); ++t) {
-      const Eigen::Vector3d a = x.segment<3>(3 * F(t, 0)), b = x.segment<3>(3 * F(t, 1)), c = x.segment<3>(3 * F(t, 2));
-      const Eigen::Vector3d w = closest_on_triangle(p, a, b, c);
-      best = std::min(best, (p - (w[0] * a + w[1] * b + w[2] * c)).norm());
-    }
-    return best;
-  };
   pcl::PointCloud<pcl::PointXYZ> used;  // the cloud cropped to the model's box
   auto within_gate = [&](const Eigen::VectorXd& x) {
     int n = 0;
-    for (const pcl::PointXYZ& q : used) n += brute(Eigen::Vector3d(q.x, q.y, q.z), x) <= o.max_distance;
+    for (const pcl::PointXYZ& q : used) n += brute_force_distance(Eigen::Vector3d(q.x, q.y, q.z), x, F) <= o.max_distance;
     return n;
   };
   auto fit_of_all = [&] {
     double sum = 0;
     for (const pcl::PointXYZ& q : used)
-      sum += std::pow(std::min(brute(Eigen::Vector3d(q.x, q.y, q.z), model.positions()), o.max_distance), 2);
+      sum += std::pow(std::min(brute_force_distance(Eigen::Vector3d(q.x, q.y, q.z), model.positions(), F), o.max_distance), 2);
     return std::sqrt(sum / used.size());
   };
   SurfaceRegistration registration(model, o);
