@@ -29,7 +29,8 @@ double brute_force_distance(const Eigen::Vector3d& p, const Eigen::VectorXd& x, 
 
 // Against brute force, on the phantom as built and after its surface moved (a refit, not a
 // rebuild). Killed by a refresh that moves the corners but not the boxes, by a search that
-// skips the farther child, and by a hint taken for the answer (all tried).
+// skips the farther child, by a hint taken for the answer, and by a lower bound that counts
+// only the boxes passed over, not the triangles tested (all tried).
 TEST(SurfaceLocator, FindsTheClosestTriangleExactly) {
   const Scene scene = load_scene(phantom_scene());
   const LiverModel model(load_scene_mesh(scene), scene);
@@ -56,6 +57,16 @@ TEST(SurfaceLocator, FindsTheClosestTriangleExactly) {
       // A hint, near or far, only narrows the search.
       const int hint = trial % 2 ? hit.triangle : static_cast<int>(rng() % F.rows());
       EXPECT_EQ(locator.closest(p, std::numeric_limits<double>::infinity(), hint).distance, hit.distance);
+      // With a cutoff: exact within it; beyond it no triangle, and a lower bound above it.
+      const double cutoff = 0.1 * std::abs(u(rng));
+      const SurfaceLocator::Hit gated = locator.closest(p, cutoff);
+      if (hit.distance <= cutoff) {
+        EXPECT_EQ(gated.distance, hit.distance);
+      } else {
+        EXPECT_EQ(gated.triangle, -1);
+        EXPECT_GT(gated.distance, cutoff);
+        EXPECT_LE(gated.distance, hit.distance);
+      }
       EXPECT_NEAR((hit.point - p).norm(), hit.distance, 1e-12);
       const Eigen::Vector3d corner = x.segment<3>(3 * F(hit.triangle, 0));
       EXPECT_NEAR((hit.point - corner).dot(hit.normal), 0.0, 1e-12);  // the point lies on its triangle's plane
@@ -383,6 +394,14 @@ TEST(PhantomRegistration, PointsBeyondTheGateAreFoundOnceTheSurfaceComesNear) {
     f = registration.refine();
   }
   EXPECT_GT(within_gate(model.positions()), inliers + 10);  // the surface came near some far points
+  // A cloud of as many points, all deep inside the lobe (beyond the gate), is refused; the fit
+  // of all points is the last accepted cloud's again, whatever this one's search left. Killed
+  // by hits kept as those of the accepted points (tried).
+  pcl::PointCloud<pcl::PointXYZ> deep;
+  for (size_t k = 0; k < used.size(); ++k) deep.push_back(pcl::PointXYZ(-0.05, -0.02, 0.005 + 1e-6 * k));
+  EXPECT_THROW(registration.register_cloud(deep), std::invalid_argument);
+  f = registration.refine();
+  EXPECT_NEAR(f.rms_all, fit_of_all(), 1e-12);
 }
 
 TEST(PhantomRegistration, RecoversALiftFromNoisyPartialClouds) {

@@ -398,6 +398,14 @@ TEST(UncertaintyWorker, AnalysesTheStateItIsHandedOnAModelOfItsOwn) {
   EXPECT_LT((u_worker - u_direct).norm(), 1e-9 * u_direct.norm());
   EXPECT_TRUE(worker.start(p.model, {}, 9));  // free again once taken
   EXPECT_EQ(wait_for(worker).tag, 9u);
+  // A capsule its model refuses: that start throws, the next one runs. Killed by a refused
+  // capsule kept for the next start (tried).
+  CapsuleOptions refused = capsule;
+  refused.young_modulus = -1;
+  worker.set_capsule(refused);
+  EXPECT_THROW(worker.start(p.model, {}, 10), std::invalid_argument);
+  ASSERT_TRUE(worker.start(p.model, {}, 11));
+  EXPECT_EQ(wait_for(worker).tag, 11u);
 }
 
 TEST(UncertaintyWorker, ABrokenStateIsAnErrorNotACrash) {

@@ -192,6 +192,7 @@ class SurfaceRegistration {
   SurfaceLocator locator_;
   std::vector<SurfaceLocator::Hit> hits_;  // of points_, at the positions searched_at_
   Eigen::VectorXd searched_at_;            // empty: hits_ are not of points_
+  std::optional<Eigen::Vector3d> viewpoint_;  // of the last accepted cloud (model frame)
   std::vector<std::pair<double, int>> ranked_;
   std::vector<char> covered_;  // per boundary triangle: holds an accepted point
   RegistrationFrame last_;     // of the last registered cloud (refine reports its support)

@@ -27,8 +27,9 @@ namespace liver_sim {
 
 class UncertaintyWorker {
  public:
-  // `model`: the worker's own, built from the caller's mesh and scene and not yet stepped.
-  // Throws std::invalid_argument for invalid options.
+  // `model`: the worker's own, built from the caller's mesh and scene and not yet stepped, with
+  // solver.threads 1 (helper threads would start at the caller's priority). Throws
+  // std::invalid_argument for invalid options.
   UncertaintyWorker(std::unique_ptr<LiverModel> model, const UncertaintyOptions& options);
   ~UncertaintyWorker();
   UncertaintyWorker(const UncertaintyWorker&) = delete;
@@ -40,6 +41,8 @@ class UncertaintyWorker {
   // Starts the analysis of `model`'s current state. `cloud_springs`: the cloud's springs among
   // the model's (SurfaceRegistration::cloud_springs); `tag`: the caller's, returned with the
   // result. Returns false, starting nothing, while an analysis runs or its result awaits take().
+  // Throws std::invalid_argument, starting nothing, when the model refuses the capsule of
+  // set_capsule() (not tried again).
   bool start(const LiverModel& model, std::vector<SurfaceTarget> cloud_springs, uint64_t tag);
 
   struct Result {

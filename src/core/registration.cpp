@@ -187,6 +187,8 @@ void SurfaceRegistration::clear() {
   alignment_ = Eigen::Isometry3d::Identity();
   aligned_ = false;
   points_->clear();
+  searched_at_.resize(0);
+  viewpoint_.reset();
 }
 
 std::string cloud_size_error(uint64_t points) {
@@ -404,6 +406,7 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   // their remaining updates do not (the search state may be this cloud's).
   updates_left_ = 0;
   points_.swap(previous_points_);
+  searched_at_.resize(0);  // the hits are not of points_ from here on
   frame.input_points = filter(cloud);
   if (points_->empty()) {
     points_.swap(previous_points_);
@@ -415,7 +418,9 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   const bool was_aligned = aligned_, was_requested = align_requested_;
   auto refuse = [&](const std::string& why) {
     points_.swap(previous_points_);
-    searched_at_.resize(0);  // the hits are this cloud's
+    // The hits are this cloud's; the locator faces the last accepted cloud's viewpoint again.
+    searched_at_.resize(0);
+    locator_.build(model_.positions(), model_.boundary(), viewpoint_);
     alignment_ = previous_alignment;
     aligned_ = was_aligned;
     align_requested_ = was_requested;
@@ -433,6 +438,7 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
                             : "no point of the cloud lies within max_distance of the surface");
   const std::string why = unsupported(found, frame.coverage);
   if (!why.empty()) refuse(why);
+  viewpoint_ = eye;
   accept_update(found, frame);
   if (frame.step.status != StepResult::Status::Diverged) updates_left_ = options_.correspondence_updates - 1;
   continue_updates(options_.frame_updates - 1, frame);

@@ -1,15 +1,19 @@
 #include "liver_sim/uncertainty_worker.h"
 
+#include <omp.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <unistd.h>
 
 #include <stdexcept>
 
+#include "liver_sim/worker_pool.h"
+
 namespace liver_sim {
 namespace {
 
 // CFS gives a thread at nice +10 about a tenth of the share of one at 0 when both want the core.
+// (A real-time simulation thread preempts it outright.)
 constexpr int kNice = 10;
 
 bool finite(const std::vector<TargetUncertainty::Covariance>& covariances) {
@@ -43,9 +47,10 @@ bool UncertaintyWorker::start(const LiverModel& model, std::vector<SurfaceTarget
     if (state_ != State::Idle) return false;
     // The thread waits while Idle: the model is the caller's to change.
     if (capsule_) {
-      const std::string error = model_->set_capsule(*capsule_);
+      const CapsuleOptions capsule = *capsule_;
+      capsule_.reset();  // tried once: a refused one would be refused at every start
+      const std::string error = model_->set_capsule(capsule);
       if (!error.empty()) throw std::invalid_argument("the analysis's capsule: " + error);
-      capsule_.reset();
     }
     model_->set_stiffness_scale(model.stiffness_scale());
     model_->set_surface_targets(model.surface_targets());
@@ -67,8 +72,12 @@ std::optional<UncertaintyWorker::Result> UncertaintyWorker::take() {
 }
 
 void UncertaintyWorker::run() {
-  // Per thread on Linux: the caller's threads keep their priority.
+  // The thread was started by the simulation's, whose real-time scheduling it would inherit;
+  // the nice value is per thread on Linux. Its processors stay the simulation's. CHOLMOD's
+  // OpenMP regions on the calling thread, as on the simulation's (cholmod_solver.cpp).
+  set_realtime_priority(0);
   setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), kNice);
+  omp_set_max_active_levels(0);
   std::unique_lock<std::mutex> lock(mutex_);
   for (;;) {
     wake_.wait(lock, [this] { return stop_ || state_ == State::Running; });

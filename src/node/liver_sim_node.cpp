@@ -122,8 +122,10 @@ class LiverSimNode {
     }
     capsule_ = scene.capsule;
     registration_ = std::make_unique<SurfaceRegistration>(*model_, scene.registration);
-    analysis_ = std::make_unique<UncertaintyWorker>(std::make_unique<LiverModel>(load_scene_mesh(scene), scene),
-                                                    scene.registration.uncertainty);
+    Scene analysis_scene = scene;
+    analysis_scene.solver.threads = 1;  // see UncertaintyWorker
+    analysis_ = std::make_unique<UncertaintyWorker>(
+        std::make_unique<LiverModel>(load_scene_mesh(analysis_scene), analysis_scene), scene.registration.uncertainty);
     pnh.param("uncertainty_period", uncertainty_period_, 1.0);
     if (!(uncertainty_period_ >= 0)) throw std::invalid_argument("~uncertainty_period must be >= 0");
     // Clouds are cropped in the callback to the rest shape's box grown by the registration's
@@ -355,7 +357,7 @@ class LiverSimNode {
       registered_ = RegistrationFrame();
       covariances_.clear();
       analysis_due_ = false;
-      ++resets_;  // an analysis still running describes the state before
+      ++analysis_generation_;  // an analysis still running describes the state before
       steps_ = 0;
       reflected_stamp_ = ros::Time();
     }
@@ -364,6 +366,8 @@ class LiverSimNode {
       if (error.empty()) {
         capsule_ = *capsule;
         analysis_->set_capsule(*capsule);
+        ++analysis_generation_;  // one running has the old capsule
+        analysis_due_ |= clouds_registered_ > 0;
       } else ROS_ERROR("liver_sim: capsule change failed: %s", error.c_str());
     }
     if (config) changed |= reconfigure(*config, loop);
@@ -541,8 +545,8 @@ class LiverSimNode {
     const ros::WallTime now = ros::WallTime::now();
     if (!analysis_due_ || now < next_analysis_) return;
     try {
-      if (!analysis_->start(*model_, registration_->cloud_springs(), resets_)) return;
-    } catch (const std::exception& e) {  // out of memory copying the state
+      if (!analysis_->start(*model_, registration_->cloud_springs(), analysis_generation_)) return;
+    } catch (const std::exception& e) {  // out of memory copying the state, a capsule refused
       ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", e.what());
       return;
     }
@@ -556,7 +560,7 @@ class LiverSimNode {
   // made with. (simulation thread)
   void adopt_analysis() {
     std::optional<UncertaintyWorker::Result> result = analysis_->take();
-    if (!result || result->tag != resets_) return;
+    if (!result || result->tag != analysis_generation_) return;
     if (!result->error.empty()) {
       ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", result->error.c_str());
       return;
@@ -863,7 +867,7 @@ class LiverSimNode {
   ros::WallTime next_analysis_;
   ros::Time analysis_started_at_;  // the state the running analysis describes
   ros::Time analysis_stamp_;       // the state covariances_ describe
-  uint64_t resets_ = 0;
+  uint64_t analysis_generation_ = 0;  // a reset or a new capsule: analyses started before are void
 
   // Shared with the heartbeat, under status_mutex_.
   std::mutex status_mutex_;
