@@ -376,7 +376,10 @@ double SurfaceRegistration::all_points_rms() {
 double SurfaceRegistration::surface_motion() const {
   const Eigen::VectorXd& x = model_.positions();
   if (searched_at_.size() != x.size() || hits_.size() != points_->size()) return std::numeric_limits<double>::infinity();
-  return (x - searched_at_).reshaped(3, x.size() / 3).colwise().norm().maxCoeff();
+  double moved = 0;
+  for (Eigen::Index i = 0; i < x.size(); i += 3)
+    moved = std::max(moved, (x.segment<3>(i) - searched_at_.segment<3>(i)).squaredNorm());
+  return std::sqrt(moved);
 }
 
 bool SurfaceRegistration::still_beyond(const SurfaceLocator::Hit& hit, double moved) const {
