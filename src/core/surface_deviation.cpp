@@ -4,7 +4,7 @@
 #include <cmath>
 #include <vector>
 
-#include "liver_sim/registration.h"
+#include "liver_sim/surface_locator.h"
 
 namespace liver_sim {
 namespace {

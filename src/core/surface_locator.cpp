@@ -85,16 +85,19 @@ SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, double cut
   double beyond = std::numeric_limits<double>::infinity();  // squared: the nearest of what was not
   int found = -1;
   Eigen::Vector3d weights;
-  if (hint >= 0 && hint < static_cast<int>(slot_of_row_.size()) && slot_of_row_[hint] >= 0) {
-    const Eigen::Matrix3d& v = corners_[slot_of_row_[hint]];
+  auto test = [&](int slot) {
+    const Eigen::Matrix3d& v = corners_[slot];
     const Eigen::Vector3d w = closest_on_triangle(p, v.col(0), v.col(1), v.col(2));
     const double d2 = (p - v * w).squaredNorm();
-    if (d2 <= bound) {
+    if (d2 < bound || (found < 0 && d2 <= bound)) {
       bound = d2;
-      found = slot_of_row_[hint];
+      found = slot;
       weights = w;
+    } else {
+      beyond = std::min(beyond, d2);
     }
-  }
+  };
+  if (hint >= 0 && hint < static_cast<int>(slot_of_row_.size()) && slot_of_row_[hint] >= 0) test(slot_of_row_[hint]);
   // Depth first, the nearer child first; a median-split tree is at most log2(triangles) deep.
   std::array<int, 64> stack;
   int top = 0;
@@ -107,18 +110,7 @@ SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, double cut
       continue;
     }
     if (box.count > 0) {
-      for (int k = box.first; k < box.first + box.count; ++k) {
-        const Eigen::Matrix3d& v = corners_[order_[k]];
-        const Eigen::Vector3d w = closest_on_triangle(p, v.col(0), v.col(1), v.col(2));
-        const double d2 = (p - v * w).squaredNorm();
-        if (d2 < bound || (found < 0 && d2 <= bound)) {
-          bound = d2;
-          found = order_[k];
-          weights = w;
-        } else {
-          beyond = std::min(beyond, d2);
-        }
-      }
+      for (int k = box.first; k < box.first + box.count; ++k) test(order_[k]);
       continue;
     }
     const int left = static_cast<int>(&box - boxes_.data()) + 1;

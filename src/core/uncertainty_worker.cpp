@@ -94,7 +94,6 @@ void UncertaintyWorker::run() {
         error = "a covariance is not finite";
       }
     } catch (const std::exception& e) {  // not positive definite, out of memory, ...
-      covariances.clear();
       error = e.what();
     }
     lock.lock();
