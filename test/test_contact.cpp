@@ -510,5 +510,40 @@ TEST(Probe, DynamicPressSettlesOnTheStaticEquilibrium) {
               0.01 * reference.instrument_reaction(0).force.z());
 }
 
+// Modified Newton judges its factor by the residual each iteration was asked to zero. A probe
+// hovering within the alarm distance puts surface points into the contact problem without
+// loading them: the iterations, and so the factor refreshes, must be those of the same run
+// without it. Kills the contraction judged against the residual after the iteration (every
+// other iteration then refreshes the factor: 14 factorisations in 30 steps against 1).
+TEST(Probe, HoveringProbeKeepsModifiedNewtonsFactor) {
+  const double L = 0.02;
+  Scene s = block_scene(30000, 0.45, 0.0);
+  s.loads.push_back(LoadOptions::gravity({0, 0, -9.81}));  // sags the top ~0.1 mm: never reaches the probe
+  s.solver.mode = SolverOptions::Mode::Dynamic;
+  s.solver.dt = 0.01;
+  s.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
+  s.solver.max_iterations = 1;
+  s.solver.tolerance = 1e-14;  // every step takes its one iteration
+  LiverModel free(make_box_mesh({L, L, L}, {6, 6, 6}), s);
+  LiverModel hovered(make_box_mesh({L, L, L}, {6, 6, 6}), s);
+  const double gap = 0.3e-3;  // m, inside the alarm distance (0.5 mm)
+  ASSERT_LT(gap, hovered.contact().options().alarm_distance);
+  hovered.add_instrument(probe("probe", {L / 2, L / 2, L + 0.003 + gap}, 0.003));
+  int free_factorizations = 0, hovered_factorizations = 0;
+  bool candidates = false;
+  for (int k = 0; k < 30; ++k) {
+    const StepResult a = free.step(), b = hovered.step();
+    ASSERT_NE(a.status, StepResult::Status::Diverged) << a.message;
+    ASSERT_NE(b.status, StepResult::Status::Diverged) << b.message;
+    free_factorizations += a.factorizations;
+    hovered_factorizations += b.factorizations;
+    candidates |= hovered.contact().active();
+    ASSERT_EQ(b.contacts, 0) << "step " << k << ": the probe must not touch";
+  }
+  ASSERT_TRUE(candidates) << "the probe never came within the alarm distance";
+  EXPECT_EQ(hovered_factorizations, free_factorizations);
+  EXPECT_LE((hovered.positions() - free.positions()).cwiseAbs().maxCoeff(), 1e-9 * L);
+}
+
 }  // namespace
 }  // namespace liver_sim

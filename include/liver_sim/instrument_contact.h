@@ -129,8 +129,9 @@ class InstrumentContact {
   // The forces of the last update scaled along the step, l_before + alpha (l_update - l_before):
   // a line search's trial point alpha dx carries alpha of the force change (0: the update undone).
   void scale_update(double alpha);
-  // Adds to f the change of the contact forces the last update made, in the detection frames.
-  void add_force_change(Eigen::VectorXd& f) const;
+  // Adds to f the change of the contact forces the last update made, in the detection frames;
+  // false when it made none.
+  bool add_force_change(Eigen::VectorXd& f) const;
   void end_step(const Eigen::VectorXd& x);
   int loaded_contacts() const;  // contacts carrying force
 

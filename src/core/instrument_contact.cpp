@@ -604,12 +604,15 @@ void InstrumentContact::scale_update(double alpha) {
     contacts_[c].lambda = lambda_before_update_[c] + alpha * (lambda_of_update_[c] - lambda_before_update_[c]);
 }
 
-void InstrumentContact::add_force_change(Eigen::VectorXd& f) const {
+bool InstrumentContact::add_force_change(Eigen::VectorXd& f) const {
+  bool changed = false;
   for (size_t c = 0; c < contacts_.size(); ++c) {
     const Contact& contact = contacts_[c];
     const Eigen::Vector3d change = contact.frame * (lambda_of_update_[c] - lambda_before_update_[c]);
+    changed |= !change.isZero(0.0);
     for (int n = 0; n < contact.point.count; ++n) f.segment<3>(3 * contact.point.nodes[n]) += contact.point.weights[n] * change;
   }
+  return changed;
 }
 
 void InstrumentContact::end_step(const Eigen::VectorXd& x) {

@@ -14,6 +14,10 @@ namespace {
 using Clock = std::chrono::steady_clock;
 constexpr int kMaxKrylov = 30;      // GMRES iterations per Newton step
 constexpr int kRefactorAfter = 10;  // GMRES iterations beyond which the factor is refreshed
+// Modified Newton refreshes a factor whose iteration leaves more than this share of the residual
+// it was asked to zero; with a change of the contact forces the stricter share (bench, probe
+// sweeps on the cube and the phantom: 0.3-0.9 tried, doc/performance.md).
+constexpr double kContraction = 0.9, kContactContraction = 0.5;
 constexpr int kStallIterations = 5; // a capped step this long that ends no lower than it began has stalled
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
@@ -555,19 +559,21 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     if (take_fault(InjectedFault::Exception)) throw std::runtime_error("injected fault (test hook)");
     if (take_fault(InjectedFault::OutOfMemory)) throw std::bad_alloc();
     if (take_fault(InjectedFault::Slow)) std::this_thread::sleep_for(kInjectedDelay);
-    // Modified Newton keeps its factor while it contracts the residual well: with contacts, the
-    // residual it was asked to zero, which carries the update's change of the contact forces
-    // (a step that closes new gaps raises the residual it started from).
+    // Modified Newton keeps its factor while it contracts the residual well: the residual it
+    // was asked to zero, which carries the update's change of the contact forces (a step that
+    // closes new gaps raises the residual it started from). When contact forces changed, the
+    // factor also set them (through the Delassus operator), so an old one errs in the forces
+    // more than its residual shows: it must contract further.
     if (strategy == Strategy::ModifiedNewton) {
-      double asked = norm;
+      double asked = norm, contraction = kContraction;
       if (contact_update) {
-        f_tmp_ = r_;
-        contact_.add_force_change(f_tmp_);
+        f_tmp_ = r_try_;  // the residual where the iteration started (swapped above)
+        if (contact_.add_force_change(f_tmp_)) contraction = kContactContraction;
         for (int i = 0; i < f_tmp_.size(); ++i)
           if (fixed[i]) f_tmp_[i] = 0;
         asked = f_tmp_.norm();
       }
-      if (best_norm > 0.9 * asked) factor_valid_ = false;
+      if (best_norm > contraction * asked) factor_valid_ = false;
     }
     norm = best_norm;
     reference = ref_try;
