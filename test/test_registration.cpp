@@ -338,6 +338,33 @@ TEST(PhantomRegistration, UpdatesSpreadOverFramesAreTheUpdatesOfOneFrame) {
   }
 }
 
+TEST(PhantomRegistration, AFrameOutOfTimeLeavesItsUpdatesToTheNextFrames) {
+  // With the scene's time budget spent after the first solve (a budget of 1 ns), a cloud's
+  // frame does one correspondence update and leaves the other two to the next refine() calls:
+  // the same computation as one update per frame (registration.frame_updates 1). Killed by
+  // updates that ignore the budget (tried: all three run in the cloud's frame).
+  Phantom timed(5.0), spread(5.0);
+  RegistrationOptions o = timed.scene.registration;
+  ASSERT_EQ(o.correspondence_updates, 3);
+  ASSERT_GT(o.frame_updates, 1);
+  SolverOptions budget = timed.model->solver_options();
+  budget.time_budget = 1e-9;
+  ASSERT_EQ(timed.model->set_solver_options(budget), "");
+  SurfaceRegistration out_of_time(*timed.model, o);
+  o.frame_updates = 1;
+  SurfaceRegistration per_frame(*spread.model, o);
+  const CameraView v = timed.view(1e-3, 0.0, 10);
+  const pcl::PointCloud<pcl::PointXYZ> cloud = render_surface_cloud(timed.truth->positions(), timed.model->boundary(), v).cloud;
+  out_of_time.register_cloud(cloud, v.eye);
+  per_frame.register_cloud(cloud, v.eye);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(out_of_time.updates_pending(), k < 2) << "after frame " << k;
+    EXPECT_EQ(timed.model->positions(), spread.model->positions()) << "after frame " << k;
+    out_of_time.refine();
+    per_frame.refine();
+  }
+}
+
 TEST(PhantomRegistration, PointsBeyondTheGateAreFoundOnceTheSurfaceComesNear) {
   // Points 4 mm above the top of the right lobe pull it up; others 15.1-17 mm above it lie
   // beyond the 15 mm gate until the surface has come near. Later updates search again only

@@ -92,7 +92,8 @@ class SurfaceRegistration {
                                    const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
 
   // The last cloud's next correspondence updates (up to options.frame_updates of those its
-  // register_cloud left), or, once all are done, one more solve with its springs; with the
+  // register_cloud left, fewer once the scene's solver.time_budget is spent: the first always
+  // runs), or, once all are done, one more solve with its springs; with the
   // registration's solver settings. The node converges the model on the last cloud between
   // clouds, in steps short enough that the next cloud waits for one iteration. (After the
   // updates the springs stay put: correspondences that switch triangles would keep the residual

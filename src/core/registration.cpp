@@ -494,7 +494,12 @@ void SurfaceRegistration::accept_update(int found, RegistrationFrame& frame) {
 
 bool SurfaceRegistration::continue_updates(int count, RegistrationFrame& frame) {
   bool solved = false;
-  for (; count > 0 && updates_left_ > 0; --count) {
+  // A frame that has solved once and spent its time budget (a factorisation takes more than a
+  // 30 Hz frame on the phantom) leaves its remaining updates to the next refine() calls: the
+  // next cloud waits for one frame, not for all of them.
+  const double budget_s = model_.solver_options().time_budget;
+  const auto time_left = [&] { return frame.newton_iterations == 0 || ms_since(frame_start_) / 1000 < budget_s; };
+  for (; count > 0 && updates_left_ > 0 && time_left(); --count) {
     const auto t0 = Clock::now();
     const double coverage = frame.coverage, inlier_fraction = frame.inlier_fraction, scale = frame.stiffness_scale;
     const int found = find_correspondences(false, std::nullopt, frame);
