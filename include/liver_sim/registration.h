@@ -70,6 +70,7 @@ struct RegistrationFrame {
                              // beyond max_distance counted at max_distance (outliers and trimmed
                              // points included: it cannot look better than the cloud fits)
   StepResult step;           // the last solve (its status: converged, capped or rolled back)
+  int updates = 0;           // correspondence updates solved in this frame
   int newton_iterations = 0; // over all updates of this frame
   int factorizations = 0;    // CHOLMOD factorisations, over all updates
   double filter_ms = 0, correspondence_ms = 0, solve_ms = 0, total_ms = 0;

@@ -490,6 +490,7 @@ void SurfaceRegistration::accept_update(int found, RegistrationFrame& frame) {
   cloud_springs_.swap(targets_);  // targets_ is refilled at the next update
   apply_springs();
   solve(frame);
+  ++frame.updates;
 }
 
 bool SurfaceRegistration::continue_updates(int count, RegistrationFrame& frame) {
@@ -498,7 +499,7 @@ bool SurfaceRegistration::continue_updates(int count, RegistrationFrame& frame) 
   // 30 Hz frame on the phantom) leaves its remaining updates to the next refine() calls: the
   // next cloud waits for one frame, not for all of them.
   const double budget_s = model_.solver_options().time_budget;
-  const auto time_left = [&] { return frame.newton_iterations == 0 || ms_since(frame_start_) / 1000 < budget_s; };
+  const auto time_left = [&] { return frame.updates == 0 || ms_since(frame_start_) / 1000 < budget_s; };
   for (; count > 0 && updates_left_ > 0 && time_left(); --count) {
     const auto t0 = Clock::now();
     const double coverage = frame.coverage, inlier_fraction = frame.inlier_fraction, scale = frame.stiffness_scale;
