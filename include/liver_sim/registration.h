@@ -181,8 +181,8 @@ class SurfaceRegistration {
   // The last update's `found` correspondences become the cloud's springs, and are solved.
   void accept_update(int found, RegistrationFrame& frame);
   // Up to `count` more correspondence updates of the current cloud (of options.
-  // correspondence_updates), each followed by a solve. Returns whether one was solved.
-  bool continue_updates(int count, RegistrationFrame& frame);
+  // correspondence_updates), each followed by a solve (counted in frame.updates).
+  void continue_updates(int count, RegistrationFrame& frame);
 
   LiverModel& model_;
   RegistrationOptions options_;

@@ -493,8 +493,7 @@ void SurfaceRegistration::accept_update(int found, RegistrationFrame& frame) {
   ++frame.updates;
 }
 
-bool SurfaceRegistration::continue_updates(int count, RegistrationFrame& frame) {
-  bool solved = false;
+void SurfaceRegistration::continue_updates(int count, RegistrationFrame& frame) {
   // A frame that has solved once and spent its time budget (a factorisation takes more than a
   // 30 Hz frame on the phantom) leaves its remaining updates to the next refine() calls: the
   // next cloud waits for one frame, not for all of them.
@@ -510,13 +509,11 @@ bool SurfaceRegistration::continue_updates(int count, RegistrationFrame& frame) 
       frame.inlier_fraction = inlier_fraction;
       frame.stiffness_scale = scale;
       updates_left_ = 0;
-      return solved;
+      return;
     }
     accept_update(found, frame);
-    solved = true;
     updates_left_ = frame.step.status == StepResult::Status::Diverged ? 0 : updates_left_ - 1;
   }
-  return solved;
 }
 
 RegistrationFrame SurfaceRegistration::refine() {
@@ -529,7 +526,8 @@ RegistrationFrame SurfaceRegistration::refine() {
   frame.coverage = last_.coverage;
   frame.stiffness_scale = last_.stiffness_scale;
   // An update that finds the points no longer supported leaves the springs: they are solved.
-  if (updates_left_ > 0 && continue_updates(options_.frame_updates, frame)) {
+  continue_updates(options_.frame_updates, frame);
+  if (frame.updates > 0) {
     last_.correspondences = frame.correspondences;
     last_.coverage = frame.coverage;
     last_.inlier_fraction = frame.inlier_fraction;
