@@ -232,10 +232,11 @@ void contact_cases(std::vector<Case>& v) {
     c.instruments = std::move(instruments);
     v.push_back(std::move(c));
   };
-  // A 2 mm probe pressed 1.5 mm into the top, then in one frame on the far side face, 21 mm away.
-  add("probe jumps 21 mm in one frame",
+  // A 2 mm probe pressed 1.5 mm into the top, then in one frame across the top to the far
+  // corner, 16 mm away, pressed all the way.
+  add("probe jumps 16 mm across the top in one frame",
       {instrument("probe", Type::Probe, 0.002, {{0, V3(2, 2, 17.5)}, {0.005, V3(2, 2, 15.5)}, {0.010, V3(2, 2, 15.5)},
-                                       {0.011, V3(15.5, 13, 4)}})}, 20, true);
+                                       {0.011, V3(13.5, 13.5, 15.5)}})}, 20, true);
   add("probe pressed 1.5 mm sweeping at 1 m/s",
       {instrument("probe", Type::Probe, 0.002, {{0, V3(1, 7.5, 17.5)}, {0.005, V3(1, 7.5, 15.5)}, {0.018, V3(14, 7.5, 15.5)}})}, 20,
       false);
