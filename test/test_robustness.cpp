@@ -280,6 +280,48 @@ TEST(TimeBudget, ANoDescentRefreshPastTheBudgetWaitsForTheNextStep) {
             1e-9 * (unlimited->positions() - start).cwiseAbs().maxCoeff());
 }
 
+// Modified Newton on the factor of 0.6 of the suction, asked for the full suction in two
+// iterations: the first finds a descent but contracts too little, and the second would start
+// on a new factor. Past the time that factorisation needs (half of it is the budget here, and
+// the first iteration takes a tenth of it), the step ends after the first iteration, out of
+// time, where an unlimited one-iteration step ends; the next step begins with the factorisation.
+// Kills a refresh that ignores the budget (a factorisation in the first step). With the rule
+// left out, the step still ends out of time only if its first iteration alone outlasted half a
+// factorisation: on a shared machine at worst a missed kill, never a false failure.
+TEST(TimeBudget, ARefreshAfterTheFirstIterationThatDoesNotFitStartsTheNextStep) {
+  Scene s = aspiration_cube();
+  s.mesh.box_divisions = Eigen::Vector3i(12, 12, 12);  // a factorisation ten times an iteration
+  s.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
+  double factorization_s = 0;  // of the last model's first step
+  auto at_six_tenths = [&](int iterations, double budget) {
+    auto m = std::make_unique<LiverModel>(load_scene_mesh(s), s);
+    m->set_load_scale(0.6);
+    const StepResult r = m->step();
+    EXPECT_TRUE(r.converged());
+    factorization_s = 1e-3 * r.timing.factorization_ms / r.factorizations;
+    SolverOptions o = s.solver;
+    o.max_iterations = iterations;
+    o.time_budget = budget;
+    EXPECT_EQ(m->set_solver_options(o), "");
+    m->set_load_scale(1.0);
+    return m;
+  };
+  const double unlimited = std::numeric_limits<double>::infinity();
+  std::unique_ptr<LiverModel> one = at_six_tenths(1, unlimited);
+  ASSERT_EQ(one->step().factorizations, 0) << "the old factor found no descent: the scene tests the redo, not the refresh";
+  std::unique_ptr<LiverModel> two = at_six_tenths(2, unlimited);
+  ASSERT_EQ(two->step().factorizations, 1) << "the first iteration contracted well: the scene no longer tests the refresh";
+
+  std::unique_ptr<LiverModel> late = at_six_tenths(2, 0.5 * factorization_s);  // as timed in the same mesh's first step
+  const StepResult deferred = late->step();
+  EXPECT_EQ(deferred.status, StepResult::Status::NotConverged) << deferred.message;
+  EXPECT_TRUE(deferred.out_of_time);
+  EXPECT_EQ(deferred.iterations, 1);
+  EXPECT_EQ(deferred.factorizations, 0);
+  EXPECT_EQ(late->positions(), one->positions());
+  EXPECT_EQ(late->step().factorizations, 1);
+}
+
 // --- Bounds --------------------------------------------------------------------------------------
 
 // Each bound refuses the value just beyond it with the field's name and the bound in the

@@ -376,7 +376,6 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
       }
       break;
     }
-    ++result.iterations;
     using Strategy = SolverOptions::Strategy;
     // With contacts, the strategies that solve with the factor carry the contact forces in the
     // same solve; the others become Newton-Krylov, which has the factor too.
@@ -384,8 +383,17 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     const Strategy strategy = contact_.active() && !direct ? Strategy::NewtonKrylov : solver_.strategy;
     const bool current_tangent = strategy == Strategy::FullNewton || strategy == Strategy::FullNewtonEigen ||
                                  strategy == Strategy::ReusedFactorCG || strategy == Strategy::CG;
-    if (strategy == Strategy::FullNewton) factor_valid_ = false;
     const bool uses_factor = strategy != Strategy::FullNewtonEigen && strategy != Strategy::CG;
+    // A refreshed factor that the time left cannot hold starts the next step instead: an
+    // iteration and a factorisation in one real-time frame overrun it by the factorisation, and
+    // the inputs that arrive meanwhile (clouds, poses) wait or are replaced.
+    if (result.iterations > 0 && uses_factor && !factor_valid_ && Clock::now() + factorization_time_ > deadline_) {
+      result.out_of_time = true;
+      result.message = "time budget";
+      break;
+    }
+    ++result.iterations;
+    if (strategy == Strategy::FullNewton) factor_valid_ = false;
     if (!factor_valid_ || current_tangent) {
       t0 = Clock::now();
       assemble_system();
