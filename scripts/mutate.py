@@ -336,6 +336,10 @@ MUTATIONS = [
       "        result.out_of_time = true;\n        result.message = \"time budget\";\n        norm = residual(x_, r_, &reference);",
       "        x_.swap(x_try_);\n        result.out_of_time = true;\n        result.message = \"time budget\";\n        norm = residual(x_, r_, &reference);",
       "a refresh deferred past the budget keeps the trial point that found no descent"),
+    M("R8", "src/core/newton_stepper.cpp",
+      "if (result.iterations > 0 && uses_factor && !factor_valid_ && Clock::now() + factorization_time_ > deadline_) {",
+      "if (false) {",
+      "a factor judged stale after a step's first iteration is refreshed in the same step past the budget"),
 ]
 
 
