@@ -317,8 +317,8 @@ MUTATIONS = [
       "  contact_.restore(s.contact);",
       "a rollback leaves the rotations and warm starts of the failed step"),
     M("R3", "src/core/newton_stepper.cpp",
-      "if (result.iterations > 0 && Clock::now() > deadline_) {",
-      "if (Clock::now() > deadline_) {",
+      "    if (result.iterations > 0 &&\n        (Clock::now() > deadline_ ||",
+      "    if (\n        (Clock::now() > deadline_ ||",
       "out of time before the step's first iteration (no frame moves on)"),
     M("R4", "src/core/newton_stepper.cpp",
       "if (k > 1 && Clock::now() > deadline_) {",
@@ -337,8 +337,8 @@ MUTATIONS = [
       "        x_.swap(x_try_);\n        result.out_of_time = true;\n        result.message = \"time budget\";\n        norm = residual(x_, r_, &reference);",
       "a refresh deferred past the budget keeps the trial point that found no descent"),
     M("R8", "src/core/newton_stepper.cpp",
-      "if (result.iterations > 0 && uses_factor && !factor_valid_ && Clock::now() + factorization_time_ > deadline_) {",
-      "if (false) {",
+      "(Clock::now() > deadline_ || (result.iterations > iterations_before && refactorize &&",
+      "(Clock::now() > deadline_ || (false &&",
       "a factor judged stale after a step's first iteration is refreshed in the same step past the budget"),
 ]
 

@@ -364,18 +364,6 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
       }
       break;
     }
-    // Out of time: the iterate is kept, judged as at the cap (a stall needs kStallIterations
-    // iterations to judge). The first iteration of a step always runs, so that every frame moves on.
-    if (result.iterations > 0 && Clock::now() > deadline_) {
-      const int done = result.iterations - iterations_before;
-      if (current_merit >= start_merit && done >= kStallIterations && solver_.max_iterations >= kStallIterations) {
-        fail(stalled(current_merit, start_merit, done));
-      } else {
-        result.out_of_time = true;
-        result.message = "time budget";
-      }
-      break;
-    }
     using Strategy = SolverOptions::Strategy;
     // With contacts, the strategies that solve with the factor carry the contact forces in the
     // same solve; the others become Newton-Krylov, which has the factor too.
@@ -384,12 +372,23 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     const bool current_tangent = strategy == Strategy::FullNewton || strategy == Strategy::FullNewtonEigen ||
                                  strategy == Strategy::ReusedFactorCG || strategy == Strategy::CG;
     const bool uses_factor = strategy != Strategy::FullNewtonEigen && strategy != Strategy::CG;
-    // A refreshed factor that the time left cannot hold starts the next step instead: an
-    // iteration and a factorisation in one real-time frame overrun it by the factorisation, and
-    // the inputs that arrive meanwhile (clouds, poses) wait or are replaced.
-    if (result.iterations > 0 && uses_factor && !factor_valid_ && Clock::now() + factorization_time_ > deadline_) {
-      result.out_of_time = true;
-      result.message = "time budget";
+    const bool refactorize = uses_factor && (!factor_valid_ || strategy == Strategy::FullNewton);
+    // Out of time: the iterate is kept, judged as at the cap (a stall needs kStallIterations
+    // iterations to judge). The first iteration of a step always runs, so that every frame moves
+    // on. After an iteration of the same stage (a stage's start has moved its instruments), a
+    // factorisation that the time left cannot hold starts the next step instead: an iteration
+    // and a factorisation in one real-time frame overrun it by the factorisation, and the inputs
+    // that arrive meanwhile (clouds, poses) wait or are replaced.
+    if (result.iterations > 0 &&
+        (Clock::now() > deadline_ || (result.iterations > iterations_before && refactorize &&
+                                      Clock::now() + factorization_time_ > deadline_))) {
+      const int done = result.iterations - iterations_before;
+      if (current_merit >= start_merit && done >= kStallIterations && solver_.max_iterations >= kStallIterations) {
+        fail(stalled(current_merit, start_merit, done));
+      } else {
+        result.out_of_time = true;
+        result.message = "time budget";
+      }
       break;
     }
     ++result.iterations;
