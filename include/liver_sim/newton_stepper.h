@@ -140,6 +140,8 @@ class NewtonStepper {
   double residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference, bool zero_fixed = true);
   // Line-search merit: the free residual norm and the contact violation, in newtons.
   double merit(double residual_norm, const Eigen::VectorXd& x) const;
+  // Whether a factorisation as long as the last one would end before the step's deadline.
+  bool factorization_fits() const;
   // Newton iterations from the current state; adds to result (iterations, timings, status).
   // contacts_detected: the contacts are already those of the current state. Past the time
   // budget it stops.

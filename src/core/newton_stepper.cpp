@@ -306,6 +306,8 @@ StepResult NewtonStepper::advance() {
   return result;
 }
 
+bool NewtonStepper::factorization_fits() const { return Clock::now() + factorization_time_ <= deadline_; }
+
 double NewtonStepper::merit(double residual_norm, const Eigen::VectorXd& x) const {
   // A contact violation counts as the force that a stiffness E L would need to close it.
   const double k = mechanics_.parenchyma().young_modulus * mechanics_.length_scale() * contact_.violation(x);
@@ -372,7 +374,8 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     const bool current_tangent = strategy == Strategy::FullNewton || strategy == Strategy::FullNewtonEigen ||
                                  strategy == Strategy::ReusedFactorCG || strategy == Strategy::CG;
     const bool uses_factor = strategy != Strategy::FullNewtonEigen && strategy != Strategy::CG;
-    const bool refactorize = uses_factor && (!factor_valid_ || strategy == Strategy::FullNewton);
+    // This iteration factorises (full Newton in every one).
+    const bool fresh_factor = uses_factor && (!factor_valid_ || strategy == Strategy::FullNewton);
     // Out of time: the iterate is kept, judged as at the cap (a stall needs kStallIterations
     // iterations to judge). The first iteration of a step always runs, so that every frame moves
     // on. After an iteration of the same stage (a stage's start has moved its instruments), a
@@ -380,8 +383,7 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     // and a factorisation in one real-time frame overrun it by the factorisation, and the inputs
     // that arrive meanwhile (clouds, poses) wait or are replaced.
     if (result.iterations > 0 &&
-        (Clock::now() > deadline_ || (result.iterations > iterations_before && refactorize &&
-                                      Clock::now() + factorization_time_ > deadline_))) {
+        (Clock::now() > deadline_ || (result.iterations > iterations_before && fresh_factor && !factorization_fits()))) {
       const int done = result.iterations - iterations_before;
       if (current_merit >= start_merit && done >= kStallIterations && solver_.max_iterations >= kStallIterations) {
         fail(stalled(current_merit, start_merit, done));
@@ -415,7 +417,6 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     }
     // The factor of an earlier tangent keeps serving as the preconditioner (GMRES works on the
     // true Jacobian) until it no longer preconditions well or the constraints changed.
-    const bool fresh_factor = uses_factor && !factor_valid_;
     if (fresh_factor) {
       t0 = Clock::now();
       if (take_fault(InjectedFault::NotPositiveDefinite))
@@ -550,7 +551,7 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
         (!accepted || last_iteration)) {
       factor_valid_ = false;
       if (contact_update) contact_.scale_update(0.0);
-      if (Clock::now() + factorization_time_ > deadline_) {
+      if (!factorization_fits()) {
         result.out_of_time = true;
         result.message = "time budget";
         norm = residual(x_, r_, &reference);  // the evaluation is the trial's
