@@ -43,8 +43,8 @@ struct TrackedTarget {
 std::vector<TrackedTarget> tracked_targets(const LiverModel& model);
 
 // Points an incoming cloud may hold before its preparation: a 5-megapixel structured-light
-// camera gives 5e6; the preparation copies the cloud twice, so ten million points cost about
-// 0.5 GB and several frames.
+// camera gives 5e6; the node converts the message and, without a voxel grid, the preparation
+// copies it, so ten million points cost up to about 0.5 GB and several frames.
 constexpr uint64_t kMaxCloudPoints = 10000000;
 // "" when a cloud of `points` points is within kMaxCloudPoints, else the refusal naming the bound.
 std::string cloud_size_error(uint64_t points);
@@ -53,7 +53,8 @@ std::string cloud_size_error(uint64_t points);
 // `transform` (into the model frame), the non-finite ones dropped, those outside `box` dropped,
 // then a voxel grid of `voxel` (m; 0: none; each voxel's points become their centroid) and an
 // even stride down to `max_points`. Returns the number of finite points received. Throws
-// std::invalid_argument for a cloud beyond kMaxCloudPoints.
+// std::invalid_argument for a cloud beyond kMaxCloudPoints and for a voxel so fine that the box
+// spans more than 2^20 of them along an axis.
 int prepare_cloud(const pcl::PointCloud<pcl::PointXYZ>& in, const Eigen::Isometry3d& transform,
                   const Eigen::AlignedBox3d& box, double voxel, int max_points, pcl::PointCloud<pcl::PointXYZ>& out);
 
@@ -174,7 +175,10 @@ class SurfaceRegistration {
   double systematic_pull(const std::vector<SurfaceTarget>& springs, const Eigen::VectorXd& x) const;
   // The cloud's springs plus those of the held supports, to the model.
   void apply_springs();
-  // RegistrationFrame::rms_all at the model's current state.
+  // hits_ of points_ at the model's current state: kept where the surface has not moved since
+  // they were searched, else searched again (from their last hits, if they are of points_).
+  void search_hits();
+  // RegistrationFrame::rms_all at the model's current state (its hits are the next update's).
   double all_points_rms();
   // One model step with the registration's strategy and iteration cap; adds to the frame.
   void solve(RegistrationFrame& frame);
