@@ -420,9 +420,16 @@ TEST(PhantomRegistration, PointsBeyondTheGateAreFoundOnceTheSurfaceComesNear) {
     if (call < 3) {  // an update searched
       EXPECT_EQ(f.correspondences, within_gate(searched_at)) << "update " << call;
     }
-    EXPECT_NEAR(f.rms_all, fit_of_all(), 1e-12) << "call " << call;
-    searched_at = model.positions();
+    // The fit of all points takes each point's distance to the triangle its search found: no
+    // less than the brute-force fit, no more than that and twice the surface's motion since.
+    // Killed by the points beyond the gate left out of it (tried).
+    const double moved = (model.positions() - searched_at).reshaped(3, model.positions().size() / 3).colwise().norm().maxCoeff();
+    const double exact = fit_of_all();
+    EXPECT_GE(f.rms_all, exact - 1e-12) << "call " << call;
+    EXPECT_LE(f.rms_all, exact + 2 * moved + 1e-12) << "call " << call;
+    const Eigen::VectorXd before = model.positions();
     f = registration.refine();
+    if (f.updates > 0) searched_at = before;
   }
   EXPECT_GT(within_gate(model.positions()), inliers + 10);  // the surface came near some far points
   // A cloud of as many points, all deep inside the lobe (beyond the gate), is refused; the fit

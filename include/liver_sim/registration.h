@@ -67,9 +67,11 @@ struct RegistrationFrame {
   double stiffness_scale = 0;  // the springs' total over options.stiffness: min(1, coverage / full_coverage)
   double rms = 0;            // m: the accepted points' spring lengths after the solve (along the
                              // normal for point-to-plane): their distance to the surface
-  double rms_all = 0;        // m: every used point's distance to the surface after the solve, those
-                             // beyond max_distance counted at max_distance (outliers and trimmed
-                             // points included: it cannot look better than the cloud fits)
+  double rms_all = 0;        // m: every used point's distance after the solve to the triangle
+                             // its last correspondence update found, those beyond max_distance
+                             // counted at max_distance (outliers and trimmed points included: it
+                             // cannot look better than the cloud fits the surface; it exceeds
+                             // that by at most twice the surface's motion since the update)
   StepResult step;           // the last solve (its status: converged, capped or rolled back)
   int updates = 0;           // correspondence updates solved in this frame
   int newton_iterations = 0; // over all updates of this frame
@@ -175,10 +177,10 @@ class SurfaceRegistration {
   double systematic_pull(const std::vector<SurfaceTarget>& springs, const Eigen::VectorXd& x) const;
   // The cloud's springs plus those of the held supports, to the model.
   void apply_springs();
-  // hits_ of points_ at the model's current state: kept where the surface has not moved since
-  // they were searched, else searched again (from their last hits, if they are of points_).
+  // hits_ of points_ at the model's current state, each search starting from the point's last
+  // hit if they are of points_ (those still beyond max_distance are not searched).
   void search_hits();
-  // RegistrationFrame::rms_all at the model's current state (its hits are the next update's).
+  // RegistrationFrame::rms_all at the model's current state.
   double all_points_rms();
   // One model step with the registration's strategy and iteration cap; adds to the frame.
   void solve(RegistrationFrame& frame);

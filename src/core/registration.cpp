@@ -427,17 +427,13 @@ void SurfaceRegistration::search_hits() {
   const double moved = surface_motion();
   const bool hits_known = std::isfinite(moved);  // the last search was of these points
   hits_.resize(n);
-  // Unmoved since the last search (the fit measured after a solve, then the next update):
-  // its hits are exact.
-  if (moved > 0 || !hits_known) {
-    for (int i = 0; i < n; ++i) {
-      if (hits_known && still_beyond(hits_[i], moved)) {
-        hits_[i].distance -= moved;  // still a lower bound
-        continue;
-      }
-      const pcl::PointXYZ& q = (*points_)[i];
-      hits_[i] = locator_.closest(Eigen::Vector3d(q.x, q.y, q.z), options_.max_distance, hits_known ? hits_[i].triangle : -1);
+  for (int i = 0; i < n; ++i) {
+    if (hits_known && still_beyond(hits_[i], moved)) {
+      hits_[i].distance -= moved;  // still a lower bound
+      continue;
     }
+    const pcl::PointXYZ& q = (*points_)[i];
+    hits_[i] = locator_.closest(Eigen::Vector3d(q.x, q.y, q.z), options_.max_distance, hits_known ? hits_[i].triangle : -1);
   }
   searched_at_ = model_.positions();
 }
@@ -445,9 +441,24 @@ void SurfaceRegistration::search_hits() {
 double SurfaceRegistration::all_points_rms() {
   const int n = static_cast<int>(points_->size());
   if (n == 0 || locator_.empty()) return 0.0;
-  search_hits();
+  if (!std::isfinite(surface_motion())) search_hits();  // the hits are a refused cloud's
+  // Each point's distance to the triangle it found, at the current positions: no less than its
+  // distance to the surface, and no more than that and twice the surface's motion since the
+  // search; a search of every point again cost as much as the update's.
+  const Eigen::VectorXd& x = model_.positions();
+  const Eigen::MatrixX3i& F = model_.boundary();
   double sum = 0;
-  for (const SurfaceLocator::Hit& hit : hits_) sum += std::pow(std::min(hit.distance, options_.max_distance), 2);
+  for (int i = 0; i < n; ++i) {
+    const int t = hits_[i].triangle;
+    if (t < 0) {  // beyond max_distance at the search
+      sum += std::pow(options_.max_distance, 2);
+      continue;
+    }
+    const pcl::PointXYZ& q = (*points_)[i];
+    const Eigen::Vector3d p(q.x, q.y, q.z), a = node(x, F(t, 0)), b = node(x, F(t, 1)), c = node(x, F(t, 2));
+    const Eigen::Vector3d w = closest_on_triangle(p, a, b, c);
+    sum += std::pow(std::min((p - (w[0] * a + w[1] * b + w[2] * c)).norm(), options_.max_distance), 2);
+  }
   return std::sqrt(sum / n);
 }
 
