@@ -373,10 +373,10 @@ TEST(PhantomRegistration, PointsBeyondTheGateAreFoundOnceTheSurfaceComesNear) {
   // Points 4 mm above the top of the right lobe pull it up; others 15.1-17 mm above it lie
   // beyond the 15 mm gate until the surface has come near. Later updates search again only
   // the points that may have come within the gate (their lower bound less the surface's motion
-  // since): the accepted points and the fit of all points must be those of a brute-force search
-  // at every update. Killed by a test that ignores the motion (tried: the fit of all points is
-  // off, then a crash). Not killed by a bound carried over without the motion subtracted (tried):
-  // here the first solve moves the surface farther than any far point's margin.
+  // since): the accepted points must be those of a brute-force search at every update. Killed
+  // by a test that ignores the motion (tried). Not killed by a bound carried over without the
+  // motion subtracted (tried): here the first solve moves the surface farther than any far
+  // point's margin.
   const Scene scene = load_scene(phantom_scene());
   LiverModel model(load_scene_mesh(scene), scene);
   RegistrationOptions o = scene.registration;
@@ -563,14 +563,16 @@ TEST(PhantomRegistration, HugeCloudIsCroppedAndDownsampled) {
 }
 
 // The voxel grid against PCL's VoxelGrid: the same centroids in the same order. Points lie
-// within 0.4 voxel of the voxels' centres on both sides of every axis' zero, so that no
-// rounding puts a point in another voxel. Killed by voxel indices truncated instead of floored
-// (the voxels on either side of zero merge) and by the y and z strides swapped in the key (the
-// order changes) (both tried); the crop and the finite count alongside.
+// within 0.4 voxel of the voxels' centres on both sides of every axis' zero, and in the voxels
+// the box's faces cut, so that no rounding puts a point in another voxel. Killed by voxel
+// indices truncated instead of floored (the voxels on either side of zero merge), by the y and
+// z strides swapped in the key (the order changes) and by a row one voxel short (the last
+// voxel of a row merges with the next row's first) (all tried); the crop and the finite count
+// alongside.
 TEST(PrepareCloud, VoxelCentroidsAreThoseOfPclVoxelGrid) {
   const double voxel = 5e-3;
   std::mt19937 rng(3);
-  std::uniform_int_distribution<int> cell(-12, 11);
+  std::uniform_int_distribution<int> cell(-14, 13);
   std::uniform_real_distribution<double> offset(-0.4, 0.4);
   pcl::PointCloud<pcl::PointXYZ> cloud, inside;
   for (int i = 0; i < 100000; ++i) {
@@ -581,18 +583,32 @@ TEST(PrepareCloud, VoxelCentroidsAreThoseOfPclVoxelGrid) {
     if (i % 100 == 0) cloud.push_back(pcl::PointXYZ(std::nanf(""), 0, 0));
     if (i % 100 == 1) cloud.push_back(pcl::PointXYZ(0, 0, 0.1f));  // beyond the box
   }
-  const Eigen::AlignedBox3d box(Eigen::Vector3d::Constant(-0.07), Eigen::Vector3d::Constant(0.07));
+  // The box ends half a voxel into cells -15 and 14 along each axis; points in those too.
+  for (const float edge : {static_cast<float>(-voxel * 14.3), static_cast<float>(voxel * 14.2)})
+    for (int j = -14; j < 14; ++j)
+      for (int k = -14; k < 14; ++k) {
+        const float a = static_cast<float>(voxel * (j + 0.5)), b = static_cast<float>(voxel * (k + 0.5));
+        for (const pcl::PointXYZ& q : {pcl::PointXYZ(edge, a, b), pcl::PointXYZ(a, edge, b), pcl::PointXYZ(a, b, edge)}) {
+          cloud.push_back(q);
+          inside.push_back(q);
+        }
+      }
+  const Eigen::AlignedBox3d box(Eigen::Vector3d::Constant(-0.0725), Eigen::Vector3d::Constant(0.0725));
   pcl::PointCloud<pcl::PointXYZ> prepared, reference;
   const int finite = prepare_cloud(cloud, Eigen::Isometry3d::Identity(), box, voxel, 1000000, prepared);
-  EXPECT_EQ(finite, 101000);
+  EXPECT_EQ(finite, static_cast<int>(inside.size()) + 1000);  // the points beyond the box
   pcl::VoxelGrid<pcl::PointXYZ> grid;
   grid.setInputCloud(inside.makeShared());
   grid.setLeafSize(voxel, voxel, voxel);
   grid.filter(reference);
   ASSERT_EQ(prepared.size(), reference.size());
-  ASSERT_GT(reference.size(), 10000u);  // most of the 24^3 voxels hold points
+  ASSERT_GT(reference.size(), 15000u);  // most of the 28^3 voxels hold points
   for (size_t i = 0; i < reference.size(); ++i)
     ASSERT_LT((prepared[i].getVector3fMap() - reference[i].getVector3fMap()).norm(), 1e-7) << "centroid " << i;
+  // A voxel too fine for the box (14.5 million along each axis) is refused, naming the bound.
+  EXPECT_TRUE(voxel_grid_error(voxel, box).empty());
+  EXPECT_NE(voxel_grid_error(1e-8, box).find("1048576"), std::string::npos) << voxel_grid_error(1e-8, box);
+  EXPECT_THROW(prepare_cloud(cloud, Eigen::Isometry3d::Identity(), box, 1e-8, 1000000, prepared), std::invalid_argument);
 }
 
 }  // namespace

@@ -43,18 +43,23 @@ struct TrackedTarget {
 std::vector<TrackedTarget> tracked_targets(const LiverModel& model);
 
 // Points an incoming cloud may hold before its preparation: a 5-megapixel structured-light
-// camera gives 5e6; the node converts the message and, without a voxel grid, the preparation
-// copies it, so ten million points cost up to about 0.5 GB and several frames.
+// camera gives 5e6; the node converts the message and the preparation copies it (without a
+// voxel grid) or keeps a sum per voxel, so ten million points cost up to about 0.5 GB and
+// several frames.
 constexpr uint64_t kMaxCloudPoints = 10000000;
 // "" when a cloud of `points` points is within kMaxCloudPoints, else the refusal naming the bound.
 std::string cloud_size_error(uint64_t points);
+
+// "" when a voxel grid of `voxel` (m; 0: none) over `box` has at most 2^20 voxels along each
+// axis, else the refusal naming the bound.
+std::string voxel_grid_error(double voxel, const Eigen::AlignedBox3d& box);
 
 // Cloud preparation, shared by register_cloud and the node's callback: points moved by
 // `transform` (into the model frame), the non-finite ones dropped, those outside `box` dropped,
 // then a voxel grid of `voxel` (m; 0: none; each voxel's points become their centroid) and an
 // even stride down to `max_points`. Returns the number of finite points received. Throws
-// std::invalid_argument for a cloud beyond kMaxCloudPoints and for a voxel so fine that the box
-// spans more than 2^20 of them along an axis.
+// std::invalid_argument for a cloud beyond kMaxCloudPoints and for a voxel too fine for `box`
+// (voxel_grid_error).
 int prepare_cloud(const pcl::PointCloud<pcl::PointXYZ>& in, const Eigen::Isometry3d& transform,
                   const Eigen::AlignedBox3d& box, double voxel, int max_points, pcl::PointCloud<pcl::PointXYZ>& out);
 
@@ -177,8 +182,9 @@ class SurfaceRegistration {
   double systematic_pull(const std::vector<SurfaceTarget>& springs, const Eigen::VectorXd& x) const;
   // The cloud's springs plus those of the held supports, to the model.
   void apply_springs();
-  // hits_ of points_ at the model's current state, each search starting from the point's last
-  // hit if they are of points_ (those still beyond max_distance are not searched).
+  // hits_ of points_ at the model's current state, on the locator as refreshed by the caller,
+  // each search starting from the point's last hit if they are of points_ (those still beyond
+  // max_distance are not searched).
   void search_hits();
   // RegistrationFrame::rms_all at the model's current state.
   double all_points_rms();

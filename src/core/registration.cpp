@@ -197,21 +197,35 @@ std::string cloud_size_error(uint64_t points) {
 
 namespace {
 
+constexpr int kMaxVoxelsPerAxis = 1 << 20;  // a 64-bit key holds three indices
+
+Eigen::Array3d voxel_cells(double size, const Eigen::AlignedBox3d& box) {
+  return (box.max() / size).array().floor() - (box.min() / size).array().floor() + 1;
+}
+
+}  // namespace
+
+std::string voxel_grid_error(double voxel, const Eigen::AlignedBox3d& box) {
+  if (!(voxel > 0) || !((voxel_cells(voxel, box) > kMaxVoxelsPerAxis).any())) return "";
+  std::ostringstream m;
+  m << "a voxel of " << voxel << " m is too fine for a box of " << box.sizes().maxCoeff() << " m: at most "
+    << kMaxVoxelsPerAxis << " voxels along an axis";
+  return m.str();
+}
+
+namespace {
+
 // The centroids of a cloud's points per voxel of a grid aligned at multiples of `size` (m), as
 // PCL's VoxelGrid gives them. Its voxels are found by hashing, in one pass: VoxelGrid sorts
 // every point by its voxel, which took twice as long as the crop (100,000 points, 5 mm voxels).
 class VoxelCentroids {
  public:
-  // Points to come lie in `box`, which spans at most kMaxCells voxels per axis.
+  // Points to come lie in `box` (throws std::invalid_argument with voxel_grid_error's refusal).
   VoxelCentroids(double size, const Eigen::AlignedBox3d& box) : size_(size) {
+    const std::string too_fine = voxel_grid_error(size, box);
+    if (!too_fine.empty()) throw std::invalid_argument(too_fine);
     lower_ = (box.min() / size).array().floor();
-    const Eigen::Array3d cells = (box.max() / size).array().floor() - lower_ + 1;
-    if ((cells > kMaxCells).any()) {
-      std::ostringstream m;
-      m << "a voxel of " << size << " m is too fine for the cloud's box of " << box.sizes().maxCoeff()
-        << " m: at most " << kMaxCells << " voxels across it";
-      throw std::invalid_argument(m.str());
-    }
+    const Eigen::Array3d cells = voxel_cells(size, box);
     row_ = static_cast<int64_t>(cells.x());
     layer_ = row_ * static_cast<int64_t>(cells.y());
     rehash(1024);
@@ -252,7 +266,6 @@ class VoxelCentroids {
   }
 
  private:
-  static constexpr double kMaxCells = 1 << 20;  // voxels per axis: a key holds three indices
   size_t bucket(int64_t key) const {
     return static_cast<size_t>((static_cast<uint64_t>(key) * 0x9E3779B97F4A7C15ull) >> shift_);
   }
@@ -288,6 +301,7 @@ int prepare_cloud(const pcl::PointCloud<pcl::PointXYZ>& in, const Eigen::Isometr
   std::optional<VoxelCentroids> grid;
   if (voxel > 0) grid.emplace(voxel, box);
   out.clear();
+  if (!grid) out.reserve(in.size());
   int finite_points = 0;
   for (const pcl::PointXYZ& q : in) {
     if (!finite(q)) continue;
@@ -311,7 +325,7 @@ int prepare_cloud(const pcl::PointCloud<pcl::PointXYZ>& in, const Eigen::Isometr
 
 int SurfaceRegistration::filter(const pcl::PointCloud<pcl::PointXYZ>& cloud) {
   // Only points within max_distance of the model's box can correspond; cropping first also
-  // keeps the voxel grid's index range small (PCL gives up on a grid of over 2^31 voxels).
+  // bounds the voxel grid (voxel_grid_error).
   const Eigen::VectorXd& x = model_.positions();
   Eigen::AlignedBox3d box;
   for (int i = 0; i < x.size(); i += 3) box.extend(x.segment<3>(i));
@@ -371,6 +385,8 @@ int SurfaceRegistration::find_correspondences(bool new_cloud, const std::optiona
   if (new_cloud) {
     searched_at_.resize(0);
     locator_.build(model_.positions(), model_.boundary(), viewpoint);
+  } else {
+    locator_.refresh(model_.positions(), model_.boundary());
   }
   search_hits();
   ranked_.clear();
@@ -423,7 +439,6 @@ std::string SurfaceRegistration::unsupported(int accepted, double coverage) cons
 
 void SurfaceRegistration::search_hits() {
   const int n = static_cast<int>(points_->size());
-  locator_.refresh(model_.positions(), model_.boundary());
   const double moved = surface_motion();
   const bool hits_known = std::isfinite(moved);  // the last search was of these points
   hits_.resize(n);
@@ -441,10 +456,13 @@ void SurfaceRegistration::search_hits() {
 double SurfaceRegistration::all_points_rms() {
   const int n = static_cast<int>(points_->size());
   if (n == 0 || locator_.empty()) return 0.0;
-  if (!std::isfinite(surface_motion())) search_hits();  // the hits are a refused cloud's
-  // Each point's distance to the triangle it found, at the current positions: no less than its
-  // distance to the surface, and no more than that and twice the surface's motion since the
-  // search; a search of every point again cost as much as the update's.
+  if (!std::isfinite(surface_motion())) {  // the hits are a refused cloud's
+    locator_.refresh(model_.positions(), model_.boundary());
+    search_hits();
+  }
+  // Each point's distance to the triangle its search found, at the current positions: no less
+  // than its distance to the surface searched, and no more than that and twice the surface's
+  // motion since the search (searching every point again would cost as much as the update).
   const Eigen::VectorXd& x = model_.positions();
   const Eigen::MatrixX3i& F = model_.boundary();
   double sum = 0;
@@ -499,7 +517,12 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   updates_left_ = 0;
   points_.swap(previous_points_);
   searched_at_.resize(0);  // the hits are not of points_ from here on
-  frame.input_points = filter(cloud);
+  try {
+    frame.input_points = filter(cloud);
+  } catch (...) {  // a cloud too large, a voxel too fine for its box
+    points_.swap(previous_points_);
+    throw;
+  }
   if (points_->empty()) {
     points_.swap(previous_points_);
     throw std::invalid_argument(frame.input_points == 0 ? "the cloud has no finite point"

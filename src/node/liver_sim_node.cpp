@@ -135,6 +135,8 @@ class LiverSimNode {
     for (int i = 0; i < model_->positions().size(); i += 3) cloud_box_.extend(model_->positions().segment<3>(i));
     cloud_box_.min().array() -= scene.registration.max_distance + cloud_margin_;
     cloud_box_.max().array() += scene.registration.max_distance + cloud_margin_;
+    const std::string too_fine = voxel_grid_error(scene.registration.voxel_size, cloud_box_);
+    if (!too_fine.empty()) throw std::invalid_argument("registration.voxel_size with ~cloud_margin: " + too_fine);
     // The default instrument `tool` and one per ~instrument_frames: rods with a hemispherical tip
     // (a sphere alone pressed deeper than its radius would let the tissue close over it).
     RosInstruments::Settings instruments;
@@ -492,7 +494,12 @@ class LiverSimNode {
     }
     PendingCloud pending;
     const RegistrationOptions& o = registration_->options();
-    const int finite_points = prepare_cloud(cloud, to_model, cloud_box_, o.voxel_size, o.max_points, pending.points);
+    int finite_points = 0;
+    try {
+      finite_points = prepare_cloud(cloud, to_model, cloud_box_, o.voxel_size, o.max_points, pending.points);
+    } catch (const std::invalid_argument& e) {
+      return reject(std::string("points: ") + e.what());
+    }
     // A cloud in a sensor's frame is seen from that frame's origin; one already in the model
     // frame says nothing about where the sensor is.
     if (!msg->header.frame_id.empty() && msg->header.frame_id != frame_id_) pending.viewpoint = to_model.translation();
