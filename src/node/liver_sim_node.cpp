@@ -486,18 +486,16 @@ class LiverSimNode {
       if (!to_model.matrix().allFinite())
         return reject("points: non-finite transform from frame '" + msg->header.frame_id + "'");
     }
+    // Conversion and preparation behind one barrier: a malformed message, memory a huge cloud
+    // does not find (the voxel grid fits the crop box: checked at start).
     pcl::PointCloud<pcl::PointXYZ> cloud;
-    try {
-      pcl::fromROSMsg(*msg, cloud);
-    } catch (const std::exception& e) {
-      return reject(std::string("points: ") + e.what());
-    }
     PendingCloud pending;
     const RegistrationOptions& o = registration_->options();
     int finite_points = 0;
     try {
+      pcl::fromROSMsg(*msg, cloud);
       finite_points = prepare_cloud(cloud, to_model, cloud_box_, o.voxel_size, o.max_points, pending.points);
-    } catch (const std::invalid_argument& e) {
+    } catch (const std::exception& e) {
       return reject(std::string("points: ") + e.what());
     }
     // A cloud in a sensor's frame is seen from that frame's origin; one already in the model
