@@ -87,5 +87,10 @@ std::string pin_calling_thread(const std::vector<int>& cpus);
 // ready, ahead of every normally scheduled thread (a build, a viewer); needs CAP_SYS_NICE or an
 // RLIMIT_RTPRIO at least that high. 0: normal scheduling (SCHED_OTHER).
 std::string set_realtime_priority(int priority);
+// A background thread: normal scheduling at nice +10 (CFS then gives it about a tenth of the
+// share of a thread at 0 when both want the core; a real-time thread preempts it outright), and
+// CHOLMOD's OpenMP regions on it (cholmod_solver.cpp). The nice value is per thread on Linux; a
+// thread started by the simulation's would otherwise inherit its real-time scheduling.
+void lower_calling_thread_priority();
 
 }  // namespace liver_sim

@@ -1,20 +1,11 @@
 #include "liver_sim/uncertainty_worker.h"
 
-#include <omp.h>
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
-
 #include <stdexcept>
 
 #include "liver_sim/worker_pool.h"
 
 namespace liver_sim {
 namespace {
-
-// CFS gives a thread at nice +10 about a tenth of the share of one at 0 when both want the core.
-// (A real-time simulation thread preempts it outright.)
-constexpr int kNice = 10;
 
 bool finite(const std::vector<TargetUncertainty::Covariance>& covariances) {
   for (const TargetUncertainty::Covariance& c : covariances)
@@ -72,12 +63,8 @@ std::optional<UncertaintyWorker::Result> UncertaintyWorker::take() {
 }
 
 void UncertaintyWorker::run() {
-  // The thread was started by the simulation's, whose real-time scheduling it would inherit;
-  // the nice value is per thread on Linux. Its processors stay the simulation's. CHOLMOD's
-  // OpenMP regions on the calling thread, as on the simulation's (cholmod_solver.cpp).
-  set_realtime_priority(0);
-  setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), kNice);
-  omp_set_max_active_levels(0);
+  // Its processors stay the simulation's.
+  lower_calling_thread_priority();
   std::unique_lock<std::mutex> lock(mutex_);
   for (;;) {
     wake_.wait(lock, [this] { return stop_ || state_ == State::Running; });

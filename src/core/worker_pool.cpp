@@ -1,7 +1,11 @@
 #include "liver_sim/worker_pool.h"
 
+#include <omp.h>
 #include <pthread.h>
 #include <sched.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cstring>
@@ -119,6 +123,13 @@ std::string set_realtime_priority(int priority) {
   p.sched_priority = priority;
   const int error = pthread_setschedparam(pthread_self(), priority > 0 ? SCHED_FIFO : SCHED_OTHER, &p);
   return error == 0 ? "" : std::strerror(error);
+}
+
+void lower_calling_thread_priority() {
+  constexpr int kNice = 10;
+  set_realtime_priority(0);
+  setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), kNice);
+  omp_set_max_active_levels(0);
 }
 
 }  // namespace liver_sim
