@@ -31,6 +31,10 @@ class CholmodSolver {
   // keeps no factor) when the matrix is not positive definite or has non-finite entries.
   bool factorize(const std::vector<double>& values);
 
+  // Exchanges the numeric factors of two solvers analysed on the same pattern (a factorisation
+  // done on another thread handed over); each counts it as a factorisation. Not thread-safe.
+  void swap_factor(CholmodSolver& other);
+
   // x = A^-1 b with the last successful factor.
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x);
   // X = A^-1 B, all columns in one pass over the factor.

@@ -111,6 +111,18 @@ bool CholmodSolver::factorize(const std::vector<double>& values) {
   return factorized_;
 }
 
+void CholmodSolver::swap_factor(CholmodSolver& other) {
+  if (!factor_ || !other.factor_ || factor_->n != other.factor_->n)
+    throw std::logic_error("CholmodSolver::swap_factor between different patterns");
+  // The analysis travels with the factor: each stays consistent even if the orderings differed.
+  std::swap(factor_, other.factor_);
+  std::swap(factorized_, other.factorized_);
+  inverse_perm_.swap(other.inverse_perm_);
+  supernode_of_.swap(other.supernode_of_);
+  ++factorizations_;
+  ++other.factorizations_;
+}
+
 void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) {
   solve_columns(b.data(), 1);
   x = Eigen::Map<const Eigen::VectorXd>(static_cast<double*>(x_->x), b.size());
