@@ -30,8 +30,10 @@
 #include <Eigen/SparseCholesky>
 #include <chrono>
 #include <limits>
+#include <memory>
 #include <string>
 
+#include "liver_sim/background_factorization.h"
 #include "liver_sim/cholmod_solver.h"
 #include "liver_sim/conjugate_gradient.h"
 #include "liver_sim/gmres.h"
@@ -62,6 +64,8 @@ struct StepResult {
   int iterations = 0;         // Newton iterations (factorisations) in this step
   int linear_iterations = 0;  // GMRES iterations (preconditioned solves) in this step
   int factorizations = 0;     // numeric factorisations in this step (often 0: the factor is reused)
+  int background_factorizations = 0;  // factors finished on the background thread and taken up
+                                      // in this step (SolverOptions::background_refresh)
   int contacts = 0;           // instrument contacts carrying force at the end of the step
   int contact_sweeps = 0;     // Gauss-Seidel sweeps of the contact solves in this step
   double residual = 0;      // force residual relative to the load norm, at the end
@@ -102,7 +106,7 @@ class NewtonStepper {
   // the energy known for the state is void and, with refactorize, the factor too.
   void model_changed(bool refactorize);
   // The next Newton iteration factorises the matrix afresh.
-  void refactorize() { factor_valid_ = false; }
+  void refactorize() { drop_factor(); }
   // Back to the rest shape, zero velocity, time 0.
   void reset();
 
@@ -155,13 +159,19 @@ class NewtonStepper {
   void assemble_system();
   // step() without the exception barrier.
   StepResult advance();
+  // The factor no longer fits the model: the next iteration factorises in the step, and a
+  // background factorisation in progress is not taken up.
+  void drop_factor();
+  // SolverOptions::background_refresh, at the start of an iteration: a finished background
+  // factor replaces the one in use; a wanted one starts from the state last evaluated.
+  void refresh_in_background(StepResult& result);
   // True once when the injected fault is f (it is then consumed).
   bool take_fault(InjectedFault f);
 
   struct Snapshot {
     Eigen::VectorXd x, v, v_previous, x_start;
     double time = 0, state_energy = 0;
-    bool rotations_continued = false, factor_valid = false;
+    bool rotations_continued = false, factor_valid = false, refresh_wanted = false;
     long factorizations = 0;  // factorizations_ when taken
     MechanicalModel::EvaluationState mechanics;
     InstrumentContact::State contact;
@@ -180,7 +190,9 @@ class NewtonStepper {
   SolverOptions solver_;
   std::vector<double> system_;
   bool factor_valid_ = false;  // the factor preconditions the current constraint set and material
+  bool refresh_wanted_ = false;  // background refresh: the factor serves, a fresh one is asked for
   CholmodSolver cholmod_;
+  std::unique_ptr<BackgroundFactorization> background_;  // made at the first background refresh
   Gmres gmres_;
   ConjugateGradient cg_;
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Upper> eigen_ldlt_;

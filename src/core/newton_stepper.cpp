@@ -65,7 +65,7 @@ std::string NewtonStepper::set_options(const SolverOptions& solver) {
   // iteration controls leave it valid.
   if (solver.dt != solver_.dt || solver.rayleigh_mass != solver_.rayleigh_mass ||
       solver.rayleigh_stiffness != solver_.rayleigh_stiffness)
-    factor_valid_ = false;
+    drop_factor();
   // The predictor's acceleration and the rotations' angular velocity are differences over one
   // step: a new dt starts them afresh.
   if (solver.dt != solver_.dt) {
@@ -84,13 +84,13 @@ void NewtonStepper::set_positions(const Eigen::VectorXd& x) {
 
 void NewtonStepper::model_changed(bool refactorize) {
   state_energy_ = std::numeric_limits<double>::quiet_NaN();
-  if (refactorize) factor_valid_ = false;
+  if (refactorize) drop_factor();
   snapshot_valid_ = false;  // its evaluation is of the model before the change
 }
 
 void NewtonStepper::reset() {
   snapshot_valid_ = false;
-  factor_valid_ = false;
+  drop_factor();
   state_energy_ = std::numeric_limits<double>::quiet_NaN();
   x_ = mechanics_.rest_positions();
   v_.setZero();
@@ -171,6 +171,7 @@ void NewtonStepper::save(Snapshot& s) {
   s.state_energy = state_energy_;
   s.rotations_continued = rotations_continued_;
   s.factor_valid = factor_valid_;
+  s.refresh_wanted = refresh_wanted_;
   s.factorizations = factorizations_;
   mechanics_.save(s.mechanics);
   contact_.save(s.contact);
@@ -186,6 +187,9 @@ void NewtonStepper::restore(const Snapshot& s) {
   rotations_continued_ = s.rotations_continued;
   // The factor is the one from before the step unless the step replaced it.
   factor_valid_ = s.factor_valid && factorizations_ == s.factorizations;
+  // A background factorisation started in the step is of a state given up.
+  refresh_wanted_ = s.refresh_wanted;
+  if (background_) background_->cancel();
   mechanics_.restore(s.mechanics);
   contact_.restore(s.contact);
 }
@@ -222,7 +226,7 @@ StepResult NewtonStepper::advance() {
                            std::chrono::duration<double>(std::min(solver_.time_budget, 1e6)));
   StepResult result;
   x_start_ = x_;
-  if (fault_ == InjectedFault::NotPositiveDefinite) factor_valid_ = false;  // a factorisation for the fault to meet
+  if (fault_ == InjectedFault::NotPositiveDefinite) drop_factor();  // a factorisation for the fault to meet
   const bool dynamic = solver_.mode == SolverOptions::Mode::Dynamic;
   if (dynamic && solver_.rayleigh_stiffness > 0) {
     // Rayleigh damping b K v with the stiffness of the state the step starts from, fixed within
@@ -306,6 +310,35 @@ StepResult NewtonStepper::advance() {
   return result;
 }
 
+void NewtonStepper::drop_factor() {
+  factor_valid_ = false;
+  refresh_wanted_ = false;
+  if (background_) background_->cancel();
+}
+
+void NewtonStepper::refresh_in_background(StepResult& result) {
+  if (!background_) {
+    const SparsePattern& pattern = mechanics_.pattern();
+    background_ = std::make_unique<BackgroundFactorization>(pattern.rows(), pattern.column_start(), pattern.row_index());
+  }
+  if (const std::optional<bool> taken = background_->take(cholmod_)) {
+    refresh_wanted_ = false;  // a new factor has not been judged yet
+    if (*taken) {
+      ++factorizations_;  // a rollback sees the new factor
+      ++result.background_factorizations;
+    } else {
+      factor_valid_ = false;  // not positive definite: the factorisation in the step meets it and rolls back
+    }
+  }
+  if (factor_valid_ && refresh_wanted_ && background_->idle()) {
+    const auto t0 = Clock::now();
+    assemble_system();  // where the residual was last evaluated: the iterate
+    result.timing.assembly_ms += ms_since(t0);
+    background_->start(system_);
+    refresh_wanted_ = false;
+  }
+}
+
 bool NewtonStepper::factorization_fits() const { return Clock::now() + factorization_time_ <= deadline_; }
 
 double NewtonStepper::merit(double residual_norm, const Eigen::VectorXd& x) const {
@@ -374,6 +407,7 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     const bool current_tangent = strategy == Strategy::FullNewton || strategy == Strategy::FullNewtonEigen ||
                                  strategy == Strategy::ReusedFactorCG || strategy == Strategy::CG;
     const bool uses_factor = strategy != Strategy::FullNewtonEigen && strategy != Strategy::CG;
+    if (strategy == Strategy::ModifiedNewton && solver_.background_refresh && factor_valid_) refresh_in_background(result);
     // This iteration factorises (full Newton in every one).
     const bool fresh_factor = uses_factor && (!factor_valid_ || strategy == Strategy::FullNewton);
     // Out of time: the iterate is kept, judged as at the cap (a stall needs kStallIterations
@@ -425,6 +459,7 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
             system_[pattern.diagonal(i)] = -1;
             break;
           }
+      if (background_) background_->cancel();  // it would replace this newer factor
       const bool factored = cholmod_.factorize(system_);
       factorization_time_ = Clock::now() - t0;
       ++factorizations_;
@@ -581,7 +616,12 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
           if (fixed[i]) f_tmp_[i] = 0;
         asked = f_tmp_.norm();
       }
-      if (best_norm > contraction * asked) factor_valid_ = false;
+      if (best_norm > contraction * asked) {
+        if (solver_.background_refresh)
+          refresh_wanted_ = true;  // the old factor serves meanwhile
+        else
+          factor_valid_ = false;
+      }
     }
     norm = best_norm;
     reference = ref_try;
