@@ -8,7 +8,7 @@
 // a residual of 1e-10).
 //   bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]
 //         [--frequency F] [--strategy SPEC]... [--threads N,...] [--load N,...] [--realtime-priority P]
-//         [--csv FILE] [--quiet]
+//         [--paced] [--csv FILE] [--quiet]
 // SPEC is STRATEGY[:ITERATIONS[:TOLERANCE]]: the solver.strategy, the Newton iterations allowed
 // per frame (solver.max_iterations) and the residual tolerance (solver.tolerance; 0 means "always
 // do ITERATIONS"). Each strategy runs once per thread count of --threads (solver.threads,
@@ -22,6 +22,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
@@ -44,7 +45,7 @@ using liver_sim::StepResult;
 const char* kUsage =
     "usage: bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]\n"
     "             [--frequency HZ] [--strategy STRATEGY[:ITERATIONS[:TOLERANCE]]]... [--threads N,...]\n"
-    "             [--load N,...] [--realtime-priority P] [--csv FILE] [--quiet]\n"
+    "             [--load N,...] [--realtime-priority P] [--paced] [--csv FILE] [--quiet]\n"
     "Times dynamic frames of solver.dt from the scene's static equilibrium, the scene's loads scaled\n"
     "by 1 + A sin(2 pi f t), for each solver strategy, against a converged reference run.\n"
     "  --scene FILE          YAML scene (README, 'Scene format'); required\n"
@@ -61,6 +62,8 @@ const char* kUsage =
     "  --threads N,...       solver.threads of the runs, each in [1, 64] (default 1)\n"
     "  --load N,...          busy threads beside the runs, one run per count (default 0)\n"
     "  --realtime-priority P SCHED_FIFO priority (1-99) of the timed runs' threads (default 0: normal)\n"
+    "  --paced               each frame starts on its slot of solver.dt of wall time, a late one at once,\n"
+    "                        as in the node (default: back to back); for solver.background_refresh\n"
     "  --csv FILE            write the CSV rows (one per run) to FILE instead of standard output\n"
     "  --quiet               no progress on standard error\n"
     "  --help                this text\n";
@@ -74,7 +77,7 @@ struct Spec {
 struct Run {
   std::vector<double> frame_ms;
   std::vector<Eigen::VectorXd> displacement;  // per frame
-  int newton_iterations = 0, factorizations = 0, linear_iterations = 0, diverged = 0;
+  int newton_iterations = 0, factorizations = 0, background_factorizations = 0, linear_iterations = 0, diverged = 0;
   long contacts = 0;  // loaded contacts, summed over the frames
   double factorization_ms = 0;
   std::string first_rollback;  // why the first rolled-back frame was
@@ -97,6 +100,7 @@ struct Loading {
   double amplitude = 0.5, frequency = 1.0;  // -, Hz
   std::vector<liver_sim::InstrumentOptions> instruments;  // added to the scene's
   int realtime_priority = 0;  // of the timed runs' threads (SCHED_FIFO), 0: normal scheduling
+  bool paced = false;         // frames start on their slots of solver.dt, as the node's loop
 };
 
 // Threads that keep processors busy while frames are timed, as a compiler or another program
@@ -147,10 +151,14 @@ std::vector<int> parse_counts(const std::string& s) {
   return counts;
 }
 
+// The converged solves (the start and the reference) have no time budget (--set solver.time_budget
+// is for the timed runs, as the node's one frame).
+constexpr const char* kNoBudget = "solver.time_budget=1e9";
+
 // The scene's static equilibrium, to a residual of 1e-10.
 Eigen::VectorXd equilibrium(const std::string& scene_path, std::vector<std::string> overrides) {
   for (const char* o : {"solver.mode=static", "solver.strategy=newton_krylov", "solver.max_iterations=100",
-                        "solver.tolerance=1e-10"})
+                        "solver.tolerance=1e-10", kNoBudget})
     overrides.push_back(o);
   const Scene scene = liver_sim::load_scene(scene_path, overrides);
   LiverModel model(liver_sim::load_scene_mesh(scene), scene);
@@ -186,7 +194,18 @@ Run run(const std::string& scene_path, std::vector<std::string> overrides, const
   r.tets = model.mesh().T.rows();
   r.dofs = 3 * model.mesh().V.rows();
   CompetingLoad competing(load);
+  // Paced: the time a frame leaves is the background thread's (a frame that overran starts the
+  // next at once, and the slots move on from there, as ros::WallRate does within a frame).
+  const auto period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(scene.solver.dt));
+  auto slot = std::chrono::steady_clock::now();
   for (int k = 0; k < frames; ++k) {
+    if (loading.paced) {
+      slot += period;
+      const auto now = std::chrono::steady_clock::now();
+      if (slot > now) std::this_thread::sleep_until(slot);
+      else if (now - slot > period) slot = now;
+    }
     const double t = (k + 1) * scene.solver.dt;
     model.set_load_scale(1 + loading.amplitude * std::sin(2 * M_PI * loading.frequency * t));
     const StepResult s = model.step();
@@ -194,6 +213,7 @@ Run run(const std::string& scene_path, std::vector<std::string> overrides, const
     r.displacement.push_back(model.positions() - start);
     r.newton_iterations += s.iterations;
     r.factorizations += s.factorizations;
+    r.background_factorizations += s.background_factorizations;
     r.linear_iterations += s.linear_iterations;
     r.factorization_ms += s.timing.factorization_ms;
     r.contacts += s.contacts;
@@ -233,6 +253,7 @@ int main_checked(int argc, char** argv) {
     else if (a == "--threads" && has_value) thread_counts = parse_counts(argv[++i]);
     else if (a == "--load" && has_value) loads = parse_counts(argv[++i]);
     else if (a == "--realtime-priority" && has_value) loading.realtime_priority = std::stoi(argv[++i]);
+    else if (a == "--paced") loading.paced = true;
     else if (a == "--csv" && has_value) csv = argv[++i];
     else if (a == "--quiet") quiet = true;
     else {
@@ -248,7 +269,9 @@ int main_checked(int argc, char** argv) {
   Spec reference_spec = parse_spec("newton_krylov:50:1e-10");
   reference_spec.text = "reference";
   const Eigen::VectorXd start = equilibrium(scene, overrides);
-  const Run reference = run(scene, overrides, reference_spec, loading, thread_counts[0], 0, start, quiet);
+  std::vector<std::string> reference_overrides = overrides;
+  reference_overrides.push_back(kNoBudget);
+  const Run reference = run(scene, reference_overrides, reference_spec, loading, thread_counts[0], 0, start, quiet);
   double peak = 0;  // errors are relative to the largest motion from the equilibrium in the reference run
   for (const Eigen::VectorXd& u : reference.displacement) peak = std::max(peak, u.cwiseAbs().maxCoeff());
 
@@ -256,7 +279,8 @@ int main_checked(int argc, char** argv) {
   if (!csv.empty()) file.open(csv);
   std::ostream& out = csv.empty() ? std::cout : file;
   out << "scene,tetrahedra,dofs,strategy,iterations,tolerance,threads,load,frames,median_ms,mean_ms,p95_ms,fps,"
-         "max_error,final_error,newton_iterations,linear_iterations,factorizations,factorization_ms,diverged,contacts\n"
+         "max_error,final_error,newton_iterations,linear_iterations,factorizations,factorization_ms,diverged,contacts,"
+         "background_factorizations\n"
       << std::setprecision(6);
   for (const Spec& spec : specs)
     for (int threads : thread_counts)
@@ -273,7 +297,8 @@ int main_checked(int argc, char** argv) {
             << ',' << mean << ',' << percentile(r.frame_ms, 0.95) << ',' << 1000.0 / mean << ',' << max_error / peak
             << ',' << final_error / peak << ',' << r.newton_iterations << ',' << r.linear_iterations << ','
             << r.factorizations << ',' << (r.factorizations ? r.factorization_ms / r.factorizations : 0.0) << ','
-            << r.diverged << ',' << static_cast<double>(r.contacts) / frames << '\n' << std::flush;
+            << r.diverged << ',' << static_cast<double>(r.contacts) / frames << ',' << r.background_factorizations
+            << '\n' << std::flush;
       }
   return 0;
 }
