@@ -5,12 +5,10 @@
 // knows nothing of the physics.
 #pragma once
 
-#include <condition_variable>
-#include <mutex>
 #include <optional>
-#include <thread>
 #include <vector>
 
+#include "liver_sim/background_job.h"
 #include "liver_sim/cholmod_solver.h"
 
 namespace liver_sim {
@@ -18,10 +16,8 @@ namespace liver_sim {
 class BackgroundFactorization {
  public:
   // Analyses the n x n pattern (the arrays must outlive this object) and starts the thread.
+  // Destroying it waits for a factorisation in progress.
   BackgroundFactorization(int n, const std::vector<int>& column_start, const std::vector<int>& row_index);
-  ~BackgroundFactorization();  // waits for a factorisation in progress
-  BackgroundFactorization(const BackgroundFactorization&) = delete;
-  BackgroundFactorization& operator=(const BackgroundFactorization&) = delete;
 
   // Starts factorising a copy of `values` (laid out as the pattern) unless one is in progress or
   // finished and not taken: false then, nothing started.
@@ -32,22 +28,15 @@ class BackgroundFactorization {
   std::optional<bool> take(CholmodSolver& solver);
   // The factorisation in progress or finished will not be handed over: its matrix is no longer
   // the model's.
-  void cancel();
+  void cancel() { job_.cancel(); }
   // None in progress, none waiting to be taken.
-  bool idle() const;
+  bool idle() const { return job_.idle(); }
 
  private:
-  void run();
-  enum class State { Idle, Running, Done };
   CholmodSolver solver_;
   std::vector<double> values_;
-  mutable std::mutex mutex_;
-  std::condition_variable wake_;
-  State state_ = State::Idle;
-  bool cancelled_ = false;  // the one Running is dropped when it ends
-  bool factored_ = false;   // Done: positive definite
-  bool stop_ = false;
-  std::thread thread_;  // last: started when the rest is ready
+  bool factored_ = false;  // the last job's matrix was positive definite
+  BackgroundJob job_;      // last: destroyed first, waiting for a job in progress
 };
 
 }  // namespace liver_sim

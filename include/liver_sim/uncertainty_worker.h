@@ -10,15 +10,14 @@
 // about a tenth of a core that other programs keep busy.
 #pragma once
 
-#include <condition_variable>
 #include <cstdint>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
-#include <thread>
 #include <vector>
 
+#include "liver_sim/background_job.h"
 #include "liver_sim/liver_model.h"
 #include "liver_sim/state_compliance.h"
 #include "liver_sim/target_uncertainty.h"
@@ -31,9 +30,6 @@ class UncertaintyWorker {
   // solver.threads 1 (helper threads would start at the caller's priority). Throws
   // std::invalid_argument for invalid options.
   UncertaintyWorker(std::unique_ptr<LiverModel> model, const UncertaintyOptions& options);
-  ~UncertaintyWorker();
-  UncertaintyWorker(const UncertaintyWorker&) = delete;
-  UncertaintyWorker& operator=(const UncertaintyWorker&) = delete;
 
   // The capsule of the models analysed from the next start() on (the caller's changed).
   void set_capsule(const CapsuleOptions& capsule);
@@ -59,18 +55,15 @@ class UncertaintyWorker {
   StateCompliance& compliance() { return compliance_; }
 
  private:
-  void run();
+  void analyse();  // the job, on the thread
 
   std::unique_ptr<LiverModel> model_;
   StateCompliance compliance_;
   TargetUncertainty uncertainty_;
-  std::mutex mutex_;
-  std::condition_variable wake_;
-  enum class State { Idle, Running, Done } state_ = State::Idle;
-  bool stop_ = false;
+  std::mutex capsule_mutex_;
   std::optional<CapsuleOptions> capsule_;  // to apply at the next start()
-  Result job_;
-  std::thread thread_;  // last: started once the rest is built
+  Result result_;
+  BackgroundJob job_;  // last: destroyed first, waiting for an analysis in progress
 };
 
 }  // namespace liver_sim
