@@ -481,14 +481,15 @@ TEST(Contact, BadInputIsRefusedOrStable) {
   }
 }
 
-// Dynamics: a probe pressing along a trajectory converges at every step and ends at rest on
-// the same equilibrium as the static solve.
-TEST(Probe, DynamicPressSettlesOnTheStaticEquilibrium) {
-  const double L = 0.02, r = 0.004;
+// A probe (4 mm) lowered 2 mm onto a 20 mm block and pressed 1.5 mm into it within `press_time`
+// (s), then held: dynamic steps of 10 ms, mass-proportional damping.
+constexpr double kBlock = 0.02;
+Scene dynamic_press(double press_time) {
+  const double r = 0.004;
   Scene s = block_scene(3000, 0.45, 0.3);
   InstrumentOptions p = probe("probe", Eigen::Vector3d::Zero(), r);
-  const Eigen::Vector3d end(L / 2, L / 2, L + r - 0.0015);
-  for (double t : {0.0, 0.1}) {
+  const Eigen::Vector3d end(kBlock / 2, kBlock / 2, kBlock + r - 0.0015);
+  for (double t : {0.0, press_time}) {
     InstrumentOptions::Keyframe f;
     f.t = t;
     f.position = end + Eigen::Vector3d(0, 0, t == 0 ? 0.002 : 0.0);
@@ -498,18 +499,34 @@ TEST(Probe, DynamicPressSettlesOnTheStaticEquilibrium) {
   s.solver.mode = SolverOptions::Mode::Dynamic;
   s.solver.dt = 0.01;
   s.solver.rayleigh_mass = 20;
-  LiverModel dyn(make_box_mesh({L, L, L}, {6, 6, 6}), s);
+  return s;
+}
+
+// The probe's reaction at the static equilibrium at the end of the press.
+double static_press_reaction(const Scene& dynamic) {
+  Scene st = dynamic;
+  st.solver.mode = SolverOptions::Mode::Static;
+  st.solver.strategy = SolverOptions::Strategy::NewtonKrylov;
+  st.solver.max_iterations = 60;
+  st.solver.background_refresh = false;
+  st.solver.dt = 1.0;  // the trajectory's end at the first step
+  LiverModel reference(make_box_mesh({kBlock, kBlock, kBlock}, {6, 6, 6}), st);
+  const StepResult r = reference.step();
+  EXPECT_TRUE(r.converged()) << r.message;
+  return reference.instrument_reaction(0).force.z();
+}
+
+// Dynamics: a probe pressing along a trajectory converges at every step and ends at rest on
+// the same equilibrium as the static solve.
+TEST(Probe, DynamicPressSettlesOnTheStaticEquilibrium) {
+  const Scene s = dynamic_press(0.1);
+  LiverModel dyn(make_box_mesh({kBlock, kBlock, kBlock}, {6, 6, 6}), s);
   for (int k = 0; k < 150; ++k) {
     const StepResult res = dyn.step();
     ASSERT_TRUE(res.converged()) << "step " << k << ": " << res.message;
   }
-  Scene st = s;
-  st.solver.mode = SolverOptions::Mode::Static;
-  st.solver.dt = 1.0;  // the trajectory's end at the first step
-  LiverModel reference(make_box_mesh({L, L, L}, {6, 6, 6}), st);
-  ASSERT_TRUE(reference.step().converged());
-  EXPECT_NEAR(dyn.instrument_reaction(0).force.z(), reference.instrument_reaction(0).force.z(),
-              0.01 * reference.instrument_reaction(0).force.z());
+  const double reference = static_press_reaction(s);
+  EXPECT_NEAR(dyn.instrument_reaction(0).force.z(), reference, 0.01 * reference);
 }
 
 // The node's frames: modified Newton, two iterations a step, its refreshes factorised in the
@@ -520,24 +537,11 @@ TEST(Probe, DynamicPressSettlesOnTheStaticEquilibrium) {
 // taken factor not counted as new (the contact's compliance cache then stays the old factor's)
 // survives: the iterations correct the stale operator, and the press settles all the same.
 TEST(Probe, BackgroundRefreshSettlesOnTheStaticEquilibrium) {
-  const double L = 0.02, r = 0.004;
-  Scene s = block_scene(3000, 0.45, 0.3);
-  InstrumentOptions p = probe("probe", Eigen::Vector3d::Zero(), r);
-  const Eigen::Vector3d end(L / 2, L / 2, L + r - 0.0015);
-  for (double t : {0.0, 0.3}) {
-    InstrumentOptions::Keyframe f;
-    f.t = t;
-    f.position = end + Eigen::Vector3d(0, 0, t == 0 ? 0.002 : 0.0);
-    p.trajectory.push_back(f);
-  }
-  s.instruments.push_back(p);
-  s.solver.mode = SolverOptions::Mode::Dynamic;
-  s.solver.dt = 0.01;
-  s.solver.rayleigh_mass = 20;
+  Scene s = dynamic_press(0.3);
   s.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
   s.solver.max_iterations = 2;
   s.solver.background_refresh = true;
-  LiverModel dyn(make_box_mesh({L, L, L}, {6, 6, 6}), s);
+  LiverModel dyn(make_box_mesh({kBlock, kBlock, kBlock}, {6, 6, 6}), s);
   int taken = 0;
   for (int k = 0; k < 200; ++k) {
     const StepResult res = dyn.step();
@@ -546,15 +550,8 @@ TEST(Probe, BackgroundRefreshSettlesOnTheStaticEquilibrium) {
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
   EXPECT_GT(taken, 0) << "no refresh came from the background";
-  Scene st = s;
-  st.solver.mode = SolverOptions::Mode::Static;
-  st.solver.strategy = SolverOptions::Strategy::NewtonKrylov;
-  st.solver.max_iterations = 60;
-  st.solver.dt = 1.0;  // the trajectory's end at the first step
-  LiverModel reference(make_box_mesh({L, L, L}, {6, 6, 6}), st);
-  ASSERT_TRUE(reference.step().converged());
-  EXPECT_NEAR(dyn.instrument_reaction(0).force.z(), reference.instrument_reaction(0).force.z(),
-              0.01 * reference.instrument_reaction(0).force.z());
+  const double reference = static_press_reaction(s);
+  EXPECT_NEAR(dyn.instrument_reaction(0).force.z(), reference, 0.01 * reference);
 }
 
 // Modified Newton judges its factor by the residual each iteration was asked to zero. A probe
