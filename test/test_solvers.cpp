@@ -200,20 +200,29 @@ TEST(CholmodSolver, ReportsIndefiniteAndNonFiniteMatrices) {
   ASSERT_TRUE(solver.factorize(A.values));
 }
 
-// Waits for the thread's factorisation (no bound on the time: a hung thread fails by the test's
-// own timeout).
-std::optional<bool> taken_when_done(BackgroundFactorization& background, CholmodSolver& solver) {
-  for (;;) {
-    if (std::optional<bool> taken = background.take(solver)) return taken;
+// Polls until `done` holds (the bound only keeps a hang from lasting).
+template <class Done>
+bool wait_until(Done done) {
+  for (int k = 0; k < 60000; ++k) {
+    if (done()) return true;
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
   }
+  ADD_FAILURE() << "the background thread did not finish within a minute";
+  return false;
+}
+
+// The thread's factorisation once it is done.
+std::optional<bool> taken_when_done(BackgroundFactorization& background, CholmodSolver& solver) {
+  std::optional<bool> taken;
+  wait_until([&] { return (taken = background.take(solver)).has_value(); });
+  return taken;
 }
 
 // A factor made on the background thread and handed over solves the matrix it was given, as a
 // dense Cholesky does, while the caller's old factor keeps serving until then; the handover
 // counts as a factorisation (the contact's compliance cache keys on it). Checked to fail when
 // take() hands over without swapping (the old matrix solved) and when cancel() is ignored (the
-// thread then never turns idle: the test's timeout).
+// thread then never turns idle).
 TEST(BackgroundFactorization, HandsOverTheFactorOfTheMatrixItWasGiven) {
   Assembled A;
   const int n = A.pattern.rows();
@@ -253,7 +262,7 @@ TEST(BackgroundFactorization, HandsOverTheFactorOfTheMatrixItWasGiven) {
     ASSERT_TRUE(background.start(A.values));
     std::this_thread::sleep_for(std::chrono::milliseconds(wait_ms));
     background.cancel();
-    while (!background.idle()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    ASSERT_TRUE(wait_until([&] { return background.idle(); }));
     EXPECT_FALSE(background.take(solver).has_value());
     solver.solve(b, x);
     EXPECT_LE((x - (0.5 * A.dense).llt().solve(b)).norm(), 1e-10 * x.norm());

@@ -162,8 +162,11 @@ class NewtonStepper {
   // The factor no longer fits the model: the next iteration factorises in the step, and a
   // background factorisation in progress is not taken up.
   void drop_factor();
-  // SolverOptions::background_refresh, at the start of an iteration: a finished background
-  // factor replaces the one in use; a wanted one starts from the state last evaluated.
+  // SolverOptions::background_refresh: the thread and its solver's analysis, once, when the
+  // option is first on (at construction or in set_options, not in a step).
+  void make_background();
+  // At the start of an iteration: a finished background factor replaces the one in use; a
+  // wanted one starts from the state last evaluated, if the thread is free.
   void refresh_in_background(StepResult& result);
   // True once when the injected fault is f (it is then consumed).
   bool take_fault(InjectedFault f);
@@ -173,6 +176,7 @@ class NewtonStepper {
     double time = 0, state_energy = 0;
     bool rotations_continued = false, factor_valid = false, refresh_wanted = false;
     long factorizations = 0;  // factorizations_ when taken
+    long background_starts = 0;  // background_starts_ when taken
     MechanicalModel::EvaluationState mechanics;
     InstrumentContact::State contact;
   };
@@ -192,7 +196,8 @@ class NewtonStepper {
   bool factor_valid_ = false;  // the factor preconditions the current constraint set and material
   bool refresh_wanted_ = false;  // background refresh: the factor serves, a fresh one is asked for
   CholmodSolver cholmod_;
-  std::unique_ptr<BackgroundFactorization> background_;  // made at the first background refresh
+  std::unique_ptr<BackgroundFactorization> background_;  // while SolverOptions::background_refresh was ever on
+  long background_starts_ = 0;  // background factorisations started since construction
   Gmres gmres_;
   ConjugateGradient cg_;
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Upper> eigen_ldlt_;

@@ -50,6 +50,7 @@ NewtonStepper::NewtonStepper(MechanicalModel& mechanics, InstrumentContact& cont
   const SparsePattern& pattern = mechanics_.pattern();
   system_.assign(pattern.nonzeros(), 0.0);
   cholmod_.analyze(pattern.rows(), pattern.column_start(), pattern.row_index());
+  if (solver_.background_refresh) make_background();
   x_ = x_start_ = mechanics_.rest_positions();
   v_ = Eigen::VectorXd::Zero(x_.size());
   v_previous_ = v_;
@@ -61,6 +62,13 @@ std::string NewtonStepper::set_options(const SolverOptions& solver) {
   if (!error.empty()) return error;
   if (solver.mode != solver_.mode) return "solver.mode cannot change on a running model";
   if (solver.threads != solver_.threads) return "solver.threads cannot change on a running model";
+  if (solver.background_refresh) {
+    try {
+      make_background();
+    } catch (const std::exception& e) {  // no memory, no thread
+      return std::string("solver.background_refresh: ") + e.what();
+    }
+  }
   // The factored matrix depends on dt and the damping (dynamic mode); the strategy and the
   // iteration controls leave it valid.
   if (solver.dt != solver_.dt || solver.rayleigh_mass != solver_.rayleigh_mass ||
@@ -73,6 +81,7 @@ std::string NewtonStepper::set_options(const SolverOptions& solver) {
     rotations_continued_ = false;
   }
   solver_ = solver;
+  if (!solver_.background_refresh && background_) background_->cancel();
   return "";
 }
 
@@ -172,6 +181,7 @@ void NewtonStepper::save(Snapshot& s) {
   s.rotations_continued = rotations_continued_;
   s.factor_valid = factor_valid_;
   s.refresh_wanted = refresh_wanted_;
+  s.background_starts = background_starts_;
   s.factorizations = factorizations_;
   mechanics_.save(s.mechanics);
   contact_.save(s.contact);
@@ -187,9 +197,10 @@ void NewtonStepper::restore(const Snapshot& s) {
   rotations_continued_ = s.rotations_continued;
   // The factor is the one from before the step unless the step replaced it.
   factor_valid_ = s.factor_valid && factorizations_ == s.factorizations;
-  // A background factorisation started in the step is of a state given up.
+  // A background factorisation started in the step is of a state given up; one started before
+  // it is of the state restored.
   refresh_wanted_ = s.refresh_wanted;
-  if (background_) background_->cancel();
+  if (background_ && background_starts_ != s.background_starts) background_->cancel();
   mechanics_.restore(s.mechanics);
   contact_.restore(s.contact);
 }
@@ -316,11 +327,13 @@ void NewtonStepper::drop_factor() {
   if (background_) background_->cancel();
 }
 
+void NewtonStepper::make_background() {
+  if (background_) return;
+  const SparsePattern& pattern = mechanics_.pattern();
+  background_ = std::make_unique<BackgroundFactorization>(pattern.rows(), pattern.column_start(), pattern.row_index());
+}
+
 void NewtonStepper::refresh_in_background(StepResult& result) {
-  if (!background_) {
-    const SparsePattern& pattern = mechanics_.pattern();
-    background_ = std::make_unique<BackgroundFactorization>(pattern.rows(), pattern.column_start(), pattern.row_index());
-  }
   if (const std::optional<bool> taken = background_->take(cholmod_)) {
     refresh_wanted_ = false;  // a new factor has not been judged yet
     if (*taken) {
@@ -335,6 +348,7 @@ void NewtonStepper::refresh_in_background(StepResult& result) {
     assemble_system();  // where the residual was last evaluated: the iterate
     result.timing.assembly_ms += ms_since(t0);
     background_->start(system_);
+    ++background_starts_;
     refresh_wanted_ = false;
   }
 }
@@ -459,7 +473,9 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
             system_[pattern.diagonal(i)] = -1;
             break;
           }
-      if (background_) background_->cancel();  // it would replace this newer factor
+      // A background one would replace this newer factor, which has not been judged yet.
+      if (background_) background_->cancel();
+      refresh_wanted_ = false;
       const bool factored = cholmod_.factorize(system_);
       factorization_time_ = Clock::now() - t0;
       ++factorizations_;
