@@ -102,6 +102,12 @@ def receive_status(stop, pipe):
     (monotonic clock, shared with the parent) and its stamp: the status gaps a subscriber sees.
     The soak's own process builds 100,000-point clouds and reads meshes, which pauses its
     receivers for up to 0.1-0.2 s (measured next to this receiver: no gap at those moments)."""
+    # It shares its core with the soak's own process: ahead of it (where allowed), so that the
+    # gaps measured are the node's and not this process's waits for the core.
+    try:
+        os.nice(-10)
+    except PermissionError:
+        pass
     rospy.init_node("liver_sim_soak_status", anonymous=True, argv=[], disable_signals=True)
     arrivals = []
     # TCP_NODELAY: without it, Nagle's algorithm may hold a small message for the peer's delayed ACK.
