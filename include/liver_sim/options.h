@@ -203,8 +203,11 @@ struct RegistrationOptions {
   double support_gain = 0.15;      // -, in (0, 1): share of the cloud springs' patch pull a candidate must remove
   // The tissue's stiffness factor the clouds may call for (SurfaceRegistration::
   // estimate_tissue_stiffness): a factor on every Young's modulus of the scene, kept within
-  // [1 / max, max]; 1: the scene's stiffness stands.
+  // [min, max]; both 1: the scene's stiffness stands. A min of 1 takes the scene's stiffness
+  // as the softest the patient's may be (doc/registration.md).
+  double min_tissue_stiffness_factor = 1.0;  // -, in (0, 1]
   double max_tissue_stiffness_factor = 1.0;  // -, >= 1
+  bool estimates_tissue_stiffness() const { return min_tissue_stiffness_factor < 1 || max_tissue_stiffness_factor > 1; }
   UncertaintyOptions uncertainty;
 };
 

@@ -134,10 +134,10 @@ class SurfaceRegistration {
   // Gauss-Newton step on ln s minimising sum_p |r_p|^2, linearised at the state `compliance`
   // was factorised at with its springs (as estimate_supports): a factor e^t moves the state by
   // -t A^-1 f_int, which changes r_p by t J_p, so t = -sum r_p.J_p / sum |J_p|^2 (at most a
-  // factor 2 per call, the factor within [1 / max, max] of options.max_tissue_stiffness_factor).
-  // Applied to the model from its next step; successive calls (one per analysis) converge it.
-  // Returns the factor (unchanged with max_tissue_stiffness_factor 1). Costs one solve with
-  // one column.
+  // factor 2 per call, the factor within [options.min_tissue_stiffness_factor,
+  // options.max_tissue_stiffness_factor]). Applied to the model from its next step; successive
+  // calls (one per analysis) converge it. Returns the factor (unchanged when both bounds are 1).
+  // Costs one solve with one column.
   double estimate_tissue_stiffness(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs);
 
   // Per candidate: held, and the share of the springs' pull it took away when last tried.

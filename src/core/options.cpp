@@ -172,6 +172,9 @@ std::string validate(const RegistrationOptions& o) {
        o.full_coverage > 0 && o.full_coverage <= 1 ? "" : message("registration.full_coverage", "in (0, 1]", o.full_coverage),
        candidate_error(o.candidate_supports), positive("registration.support_stiffness", o.support_stiffness),
        o.support_gain > 0 && o.support_gain < 1 ? "" : message("registration.support_gain", "in (0, 1)", o.support_gain),
+       o.min_tissue_stiffness_factor > 0 && o.min_tissue_stiffness_factor <= 1
+           ? ""
+           : message("registration.min_tissue_stiffness_factor", "in (0, 1]", o.min_tissue_stiffness_factor),
        std::isfinite(o.max_tissue_stiffness_factor) && o.max_tissue_stiffness_factor >= 1
            ? ""
            : message("registration.max_tissue_stiffness_factor", ">= 1", o.max_tissue_stiffness_factor),

@@ -83,7 +83,7 @@ SurfaceRegistration::SurfaceRegistration(LiverModel& model, const RegistrationOp
   }
   held_.assign(supports_.size(), false);
   gains_.assign(supports_.size(), 0.0);
-  if (!supports_.empty() || options.max_tissue_stiffness_factor > 1)
+  if (!supports_.empty() || options.estimates_tissue_stiffness())
     patches_ = make_surface_patches(model.mechanics(), options.uncertainty.patch_spacing);
 }
 
@@ -145,7 +145,7 @@ std::string SurfaceRegistration::set_stiffness(double stiffness) {
 double SurfaceRegistration::estimate_tissue_stiffness(StateCompliance& compliance,
                                                       const std::vector<SurfaceTarget>& springs) {
   const double scale = model_.stiffness_scale();
-  if (springs.empty() || options_.max_tissue_stiffness_factor == 1) return scale;
+  if (springs.empty() || !options_.estimates_tissue_stiffness()) return scale;
   const Eigen::VectorXd& x = compliance.state();
   const Eigen::MatrixX3i& F = model_.boundary();
   const std::vector<Eigen::Vector3d> pull = patch_spring_forces(patches_, F, springs, x);
@@ -169,8 +169,8 @@ double SurfaceRegistration::estimate_tissue_stiffness(StateCompliance& complianc
   }
   if (!(squared > 0)) return scale;
   const double step = std::clamp(-along / squared, -std::log(2.0), std::log(2.0));
-  const double bound = options_.max_tissue_stiffness_factor;
-  const double estimate = std::clamp(scale * std::exp(step), 1 / bound, bound);
+  const double estimate =
+      std::clamp(scale * std::exp(step), options_.min_tissue_stiffness_factor, options_.max_tissue_stiffness_factor);
   model_.set_stiffness_scale(estimate);
   return estimate;
 }

@@ -209,7 +209,7 @@ class Reader {
     check_keys(g, "registration", {"stiffness", "metric", "voxel_size", "max_points", "max_distance", "trim_fraction",
                                    "huber_width", "correspondence_updates", "frame_updates", "newton_iterations", "strategy",
                                    "rigid_alignment", "min_points", "min_coverage", "full_coverage",
-                                   "candidate_supports", "support_stiffness", "support_gain", "max_tissue_stiffness_factor",
+                                   "candidate_supports", "support_stiffness", "support_gain", "min_tissue_stiffness_factor", "max_tissue_stiffness_factor",
                                    "uncertainty"});
     if (g["strategy"]) o.strategy = strategy(g["strategy"], "registration.strategy");
     if (g["newton_iterations"]) o.newton_iterations = integer(g["newton_iterations"], "registration.newton_iterations");
@@ -237,6 +237,8 @@ class Reader {
     }
     if (g["support_stiffness"]) o.support_stiffness = number(g["support_stiffness"], "registration.support_stiffness");
     if (g["support_gain"]) o.support_gain = number(g["support_gain"], "registration.support_gain");
+    if (g["min_tissue_stiffness_factor"])
+      o.min_tissue_stiffness_factor = number(g["min_tissue_stiffness_factor"], "registration.min_tissue_stiffness_factor");
     if (g["max_tissue_stiffness_factor"])
       o.max_tissue_stiffness_factor = number(g["max_tissue_stiffness_factor"], "registration.max_tissue_stiffness_factor");
     if (const YAML::Node u = g["uncertainty"]) {

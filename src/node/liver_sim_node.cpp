@@ -577,7 +577,7 @@ class LiverSimNode {
     try {
       const int held = registration_->estimate_supports(analysis_->compliance(), result->cloud_springs);
       if (held >= 0) ROS_INFO("liver_sim: the clouds call for candidate support %d: held from the next cloud", held);
-      registration_->estimate_tissue_stiffness(analysis_->compliance(), result->cloud_springs);  // registration.max_tissue_stiffness_factor 1: off
+      registration_->estimate_tissue_stiffness(analysis_->compliance(), result->cloud_springs);  // both registration.*_tissue_stiffness_factor 1: off
     } catch (const std::runtime_error& e) {
       ROS_WARN_THROTTLE(5.0, "liver_sim: no support or stiffness estimate: %s", e.what());
     }
