@@ -9,7 +9,8 @@ OUT (default doc/):
                                  (30% visible, 1 mm depth noise at 25 cm), the scene's settings
   registration_grid_targets.csv  every target's error and covariance of those cases
   registration_grid_estimated.csv the same cases with the tissue's stiffness estimated from the
-                                 clouds (registration.max_tissue_stiffness_factor 4)
+                                 clouds (registration.{min,max}_tissue_stiffness_factor 0.25, 4)
+  registration_grid_stiffen.csv  the same, the clouds allowed to stiffen the model only (1, 4)
   registration_sweep.csv         the lift, model 2x too stiff: visible fraction and depth noise
   registration_crime.csv         the same sweep against the model's own lift (the inverse crime)
   registration_sweep_estimated.csv  the depth-noise sweep with the stiffness estimated
@@ -38,7 +39,8 @@ BENCH = os.path.join(REPO, "build/ws/devel/lib/liver_sim/register_bench")
 SCENE = os.path.join(REPO, "config/scenes/liver_phantom.yaml")
 TRUTH_STIFFNESS = 0.5  # truth E over the model's (make_truth_phantom.py --stiffness-ratio)
 SCENARIOS = ["lift", "press", "breathing", "pneumoperitoneum"]
-ESTIMATE = ["--set", "registration.max_tissue_stiffness_factor=4"]
+ESTIMATE = ["--set", "registration.min_tissue_stiffness_factor=0.25", "--set", "registration.max_tissue_stiffness_factor=4"]
+STIFFEN = ["--set", "registration.min_tissue_stiffness_factor=1", "--set", "registration.max_tissue_stiffness_factor=4"]
 
 
 def fmt(values):
@@ -148,6 +150,9 @@ def main():
     estimated = bench(args, ["--truth-scene", truth, "--scenario", ",".join(scenarios), "--stiffness", fmt(model_scales)]
                       + ESTIMATE)
     write(estimated, os.path.join(args.out, "registration_grid_estimated.csv"))
+    stiffened = bench(args, ["--truth-scene", truth, "--scenario", ",".join(scenarios), "--stiffness", fmt(model_scales)]
+                      + STIFFEN)
+    write(stiffened, os.path.join(args.out, "registration_grid_stiffen.csv"))
     two = [f"{TRUTH_STIFFNESS * 2:g}"]
     sweep_v = bench(args, ["--truth-scene", truth, "--stiffness", two[0], "--visible", fmt(visible)])
     sweep_n = bench(args, ["--truth-scene", truth, "--stiffness", two[0], "--noise", fmt(noise)])
@@ -165,6 +170,8 @@ def main():
     table(grid, "grid")
     print("\nThe same cases, the model's stiffness fixed and estimated:\n")
     compare(estimated, grid)
+    print("\nThe same cases, the model's stiffness fixed and stiffened only:\n")
+    compare(stiffened, grid)
     print("\nThe lift, model 2x too stiff, over depth noise, the stiffness estimated:\n")
     table(sweep_e, "visible")
     print("\nIndependent truth, lift, model 2x too stiff:\n")
