@@ -80,8 +80,13 @@ std::string NewtonStepper::set_options(const SolverOptions& solver) {
     v_previous_ = v_;
     rotations_continued_ = false;
   }
+  // Turned off: a refresh asked for and not yet taken up happens in the step, as without it.
+  if (solver_.background_refresh && !solver.background_refresh) {
+    if (refresh_wanted_ || (background_ && !background_->idle())) factor_valid_ = false;
+    refresh_wanted_ = false;
+    if (background_) background_->cancel();
+  }
   solver_ = solver;
-  if (!solver_.background_refresh && background_) background_->cancel();
   return "";
 }
 
