@@ -321,7 +321,7 @@ MUTATIONS = [
       "    if (\n        (Clock::now() > deadline_ ||",
       "out of time before the step's first iteration (no frame moves on)"),
     M("R4", "src/core/newton_stepper.cpp",
-      "if (k > 1 && Clock::now() > deadline_) {",
+      "if (k > 1 && (Clock::now() > deadline_ || (!factor_valid_ && !factorization_fits()))) {",
       "if (k > 1 && false) {",
       "out of time between stages ignored (the instruments reach their target, the tissue does not)"),
     M("R5", "src/core/newton_stepper.cpp",
@@ -340,6 +340,10 @@ MUTATIONS = [
       "(result.iterations > iterations_before && fresh_factor && !factorization_fits())",
       "(false)",
       "a factor judged stale after a step's first iteration is refreshed in the same step past the budget"),
+    M("R9", "src/core/newton_stepper.cpp",
+      "if (k > 1 && (Clock::now() > deadline_ || (!factor_valid_ && !factorization_fits()))) {",
+      "if (k > 1 && Clock::now() > deadline_) {",
+      "a later stage starts with a factorisation past the budget"),
 ]
 
 

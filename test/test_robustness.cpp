@@ -327,6 +327,65 @@ TEST(TimeBudget, ARefreshAfterTheFirstIterationThatDoesNotFitStartsTheNextStep) 
   EXPECT_EQ(late->step().factorizations, 1);
 }
 
+// The same refresh at the start of a later stage: a probe far above the cube (out of contact)
+// moved 1.5 stage lengths in one step, two stages of one iteration each, the first on the factor
+// of 0.6 of the suction. Its iteration contracts too little, and the second stage would start
+// with a factorisation. Past the time that factorisation needs (as above), the step ends after
+// the first stage, out of time: the tissue where an unlimited one-stage step leaves it, the probe
+// at the first stage's pose; the next step begins with the factorisation.
+// Kills a stage that starts with a factorisation the time left cannot hold (the rule left out:
+// the step factorises in its second stage and moves the probe to its target; tried). A missed
+// kill only if the first stage alone outlasted the budget, as above.
+TEST(TimeBudget, ARefreshThatDoesNotFitAtALaterStageEndsTheStepBetweenStages) {
+  Scene s = aspiration_cube();
+  s.mesh.box_divisions = Eigen::Vector3i(12, 12, 12);
+  s.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
+  InstrumentOptions probe;
+  probe.name = "probe";
+  probe.radius = 0.002;
+  probe.position = Eigen::Vector3d(0.0075, 0.0075, 0.05);
+  s.instruments.push_back(probe);
+  const Eigen::Vector3d start = probe.position;
+  const Eigen::Vector3d target = start - Eigen::Vector3d(0, 0, 1.5 * 0.25 * probe.radius);  // stages of a quarter radius: two
+  double factorization_s = 0;
+  auto at_six_tenths = [&](const Eigen::Vector3d& to) {
+    auto m = std::make_unique<LiverModel>(load_scene_mesh(s), s);
+    m->set_load_scale(0.6);
+    const StepResult r = m->step();
+    EXPECT_TRUE(r.converged());
+    factorization_s = 1e-3 * r.timing.factorization_ms / r.factorizations;
+    SolverOptions o = s.solver;
+    o.max_iterations = 1;
+    EXPECT_EQ(m->set_solver_options(o), "");
+    m->set_load_scale(1.0);
+    InstrumentOptions moved = probe;
+    moved.position = to;
+    m->update_instrument(0, moved);
+    return m;
+  };
+  std::unique_ptr<LiverModel> unlimited = at_six_tenths(target);
+  const StepResult both = unlimited->step();
+  ASSERT_EQ(both.factorizations, 1) << "the first stage contracted well: the scene no longer tests the refresh";
+  ASSERT_EQ(both.contacts, 0);
+  ASSERT_LE((unlimited->contact().pose(0).translation() - target).norm(), 1e-12);
+  std::unique_ptr<LiverModel> one = at_six_tenths(start);  // one stage, one iteration
+  ASSERT_EQ(one->step().factorizations, 0);
+
+  std::unique_ptr<LiverModel> late = at_six_tenths(target);
+  SolverOptions o = late->solver_options();
+  o.time_budget = 0.25 * factorization_s;  // as its own first step timed it
+  ASSERT_EQ(late->set_solver_options(o), "");
+  const StepResult deferred = late->step();
+  EXPECT_EQ(deferred.status, StepResult::Status::NotConverged) << deferred.message;
+  EXPECT_TRUE(deferred.out_of_time);
+  EXPECT_EQ(deferred.iterations, 1);
+  EXPECT_EQ(deferred.factorizations, 0);
+  EXPECT_EQ(late->positions(), one->positions());
+  EXPECT_LE((late->contact().pose(0).translation() - 0.5 * (start + target)).norm(), 1e-12)
+      << late->contact().pose(0).translation().transpose();
+  EXPECT_EQ(late->step().factorizations, 1);
+}
+
 // --- Bounds --------------------------------------------------------------------------------------
 
 // Each bound refuses the value just beyond it with the field's name and the bound in the

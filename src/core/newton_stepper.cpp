@@ -255,8 +255,11 @@ StepResult NewtonStepper::advance() {
   const int stages = contact_.begin_step(time_ + solver_.dt, x_);
   bool rotations_predicted = false;
   for (int k = 1; k <= stages && result.status != StepResult::Status::Diverged && !result.out_of_time; ++k) {
-    if (k > 1 && Clock::now() > deadline_) {
-      // Out of time between stages: the state and the instruments are the last stage's end.
+    // Out of time between stages, or a stage that would start with a factorisation the time left
+    // cannot hold (the last stage's iteration found its factor poor): the step ends at the last
+    // stage, where the state and the instruments are consistent, and the next step starts with
+    // the factorisation. A factorisation here overran the real-time frame by its whole length.
+    if (k > 1 && (Clock::now() > deadline_ || (!factor_valid_ && !factorization_fits()))) {
       result.status = StepResult::Status::NotConverged;
       result.message = "time budget";
       result.out_of_time = true;
