@@ -33,6 +33,7 @@
 #include "liver_sim/SetCapsule.h"
 #include "liver_sim/SimulationStatus.h"
 #include "liver_sim/TargetCovariances.h"
+#include "liver_sim/frame_clock.h"
 #include "liver_sim/liver_model.h"
 #include "liver_sim/registration.h"
 #include "liver_sim/step_guard.h"
@@ -228,7 +229,7 @@ class LiverSimNode {
   }
 
   void run() {
-    ros::WallRate loop(rate_);
+    FrameClock loop(1.0 / rate_, FrameClock::kCatchUp);
     ros::WallTime next_publish = ros::WallTime::now();
     bool must_step = true;  // the first step brings the scene's loads to equilibrium
     while (ros::ok()) {
@@ -266,7 +267,7 @@ class LiverSimNode {
  private:
   // apply_inputs behind the barrier: a value beyond its bounds (std::invalid_argument) is a
   // refused input, anything else a fault; the model stays as it was.
-  bool guarded_inputs(ros::WallRate& loop) {
+  bool guarded_inputs(FrameClock& loop) {
     try {
       return apply_inputs(loop);
     } catch (const std::invalid_argument& e) {
@@ -338,7 +339,7 @@ class LiverSimNode {
 
   // Moves pending inputs into the model; true when something changed. The node's lock is not
   // held while the instruments apply theirs (they report refusals through reject()).
-  bool apply_inputs(ros::WallRate& loop) {
+  bool apply_inputs(FrameClock& loop) {
     bool reset = false;
     std::optional<CapsuleOptions> capsule;
     std::optional<LiverSimConfig> config;
@@ -399,7 +400,7 @@ class LiverSimNode {
 
   // A dynamic_reconfigure change (bounded by the config's limits): all of it, or nothing when the
   // model refuses a part (the server then shows the values in force). True when the model changed.
-  bool reconfigure(const LiverSimConfig& c, ros::WallRate& loop) {
+  bool reconfigure(const LiverSimConfig& c, FrameClock& loop) {
     const SolverOptions solver_before = model_->solver_options();
     const ContactOptions contact_before = model_->contact().options();
     const double stiffness_before = registration_->options().stiffness;
@@ -423,7 +424,7 @@ class LiverSimNode {
     const bool model_changed = solver.strategy != solver_before.strategy ||
                                solver.max_iterations != solver_before.max_iterations ||
                                solver.tolerance != solver_before.tolerance || contact.friction != contact_before.friction;
-    if (c.rate != rate_) loop = ros::WallRate(c.rate);
+    if (c.rate != rate_) loop.set_period(1.0 / c.rate);
     rate_ = c.rate;
     publish_rate_ = c.publish_rate;
     display_due_ |= color_scale_max_ != c.color_scale_max || surface_alpha_ != c.surface_alpha;

@@ -22,7 +22,6 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
@@ -33,6 +32,7 @@
 #include <thread>
 #include <vector>
 
+#include "liver_sim/frame_clock.h"
 #include "liver_sim/liver_model.h"
 #include "liver_sim/worker_pool.h"
 
@@ -194,18 +194,11 @@ Run run(const std::string& scene_path, std::vector<std::string> overrides, const
   r.tets = model.mesh().T.rows();
   r.dofs = 3 * model.mesh().V.rows();
   CompetingLoad competing(load);
-  // Paced: the time a frame leaves is the background thread's (a frame that overran starts the
-  // next at once, and the slots move on from there, as ros::WallRate does within a frame).
-  const auto period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-      std::chrono::duration<double>(scene.solver.dt));
-  auto slot = std::chrono::steady_clock::now();
+  // Paced: frames on the node's grid of slots; the time a frame leaves is the background
+  // thread's.
+  liver_sim::FrameClock slots(scene.solver.dt, liver_sim::FrameClock::kCatchUp);
   for (int k = 0; k < frames; ++k) {
-    if (loading.paced) {
-      slot += period;
-      const auto now = std::chrono::steady_clock::now();
-      if (slot > now) std::this_thread::sleep_until(slot);
-      else if (now - slot > period) slot = now;
-    }
+    if (loading.paced) slots.sleep();
     const double t = (k + 1) * scene.solver.dt;
     model.set_load_scale(1 + loading.amplitude * std::sin(2 * M_PI * loading.frequency * t));
     const StepResult s = model.step();
