@@ -678,17 +678,18 @@ class LiverSimNode {
     instruments_->publish(*model_, s.header);
   }
 
-  // While a frame runs longer than one frame (a factorisation, a part of the analysis), ~status
-  // keeps the loop's rate: the last step's status again, state "busy", every frame, so that a
-  // guidance stack watching it sees a live node whose mesh is its last good state. (heartbeat
-  // thread)
+  // While a frame runs (a factorisation, a part of the analysis) and no status went out for one
+  // frame, ~status keeps the loop's rate: the last step's status again, state "busy", every
+  // frame, so that a guidance stack watching it sees a live node whose mesh is its last good
+  // state. (heartbeat thread)
   void heartbeat() {
     std::lock_guard<std::mutex> lock(status_mutex_);
     const ros::WallTime now = ros::WallTime::now();
     const ros::WallDuration period(frame_period_);
-    if (frame_start_.isZero() || last_status_time_.isZero() || now - frame_start_ < period ||
-        now - last_status_time_ < period)
-      return;
+    // One frame since the last status, counted from that status and not from the frame's start:
+    // a frame that starts after the loop slept out its slot would otherwise leave up to two
+    // frames without one.
+    if (frame_start_.isZero() || last_status_time_.isZero() || now - last_status_time_ < period) return;
     SimulationStatus s = last_status_;
     s.header.stamp = ros::Time::now();
     s.state = "busy";
