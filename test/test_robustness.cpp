@@ -239,6 +239,25 @@ TEST(TimeBudget, AStepOutOfTimeLeavesTheInstrumentAtItsStage) {
       << m.contact().pose(0).translation().transpose();
 }
 
+// A model of scene s at equilibrium under `scale` of its loads, then given all of them, with
+// `iterations` Newton iterations a step and a time budget of `budget` s, so that its next step
+// starts on the factor of the partial load. `factorization_s`: the mean factorisation of its
+// first step.
+std::unique_ptr<LiverModel> partly_loaded(const Scene& s, double scale, int iterations, double budget,
+                                          double* factorization_s = nullptr) {
+  auto m = std::make_unique<LiverModel>(load_scene_mesh(s), s);
+  m->set_load_scale(scale);
+  const StepResult r = m->step();
+  EXPECT_TRUE(r.converged());
+  if (factorization_s) *factorization_s = 1e-3 * r.timing.factorization_ms / r.factorizations;
+  SolverOptions o = s.solver;
+  o.max_iterations = iterations;
+  o.time_budget = budget;
+  EXPECT_EQ(m->set_solver_options(o), "");
+  m->set_load_scale(1.0);
+  return m;
+}
+
 // Modified Newton on the factor of a tenth of the suction, asked for the full suction in one
 // iteration: that factor finds no descent, and the iteration is redone on a new factor. With an
 // unlimited budget the step refactorises and moves. Past its budget the step must not start the
@@ -250,17 +269,7 @@ TEST(TimeBudget, AStepOutOfTimeLeavesTheInstrumentAtItsStage) {
 TEST(TimeBudget, ANoDescentRefreshPastTheBudgetWaitsForTheNextStep) {
   Scene s = aspiration_cube();
   s.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
-  auto at_a_tenth = [&](double budget) {
-    auto m = std::make_unique<LiverModel>(load_scene_mesh(s), s);
-    m->set_load_scale(0.1);
-    EXPECT_TRUE(m->step().converged());
-    SolverOptions o = s.solver;
-    o.max_iterations = 1;
-    o.time_budget = budget;
-    EXPECT_EQ(m->set_solver_options(o), "");
-    m->set_load_scale(1.0);
-    return m;
-  };
+  auto at_a_tenth = [&](double budget) { return partly_loaded(s, 0.1, 1, budget); };
   std::unique_ptr<LiverModel> unlimited = at_a_tenth(std::numeric_limits<double>::infinity());
   const Eigen::VectorXd start = unlimited->positions();
   const StepResult refreshed = unlimited->step();
@@ -296,17 +305,7 @@ TEST(TimeBudget, ARefreshAfterTheFirstIterationThatDoesNotFitStartsTheNextStep) 
   s.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
   double factorization_s = 0;  // of the last model's first step
   auto at_six_tenths = [&](int iterations, double budget) {
-    auto m = std::make_unique<LiverModel>(load_scene_mesh(s), s);
-    m->set_load_scale(0.6);
-    const StepResult r = m->step();
-    EXPECT_TRUE(r.converged());
-    factorization_s = 1e-3 * r.timing.factorization_ms / r.factorizations;
-    SolverOptions o = s.solver;
-    o.max_iterations = iterations;
-    o.time_budget = budget;
-    EXPECT_EQ(m->set_solver_options(o), "");
-    m->set_load_scale(1.0);
-    return m;
+    return partly_loaded(s, 0.6, iterations, budget, &factorization_s);
   };
   const double unlimited = std::numeric_limits<double>::infinity();
   std::unique_ptr<LiverModel> one = at_six_tenths(1, unlimited);
@@ -349,15 +348,7 @@ TEST(TimeBudget, ARefreshThatDoesNotFitAtALaterStageEndsTheStepBetweenStages) {
   const Eigen::Vector3d target = start - Eigen::Vector3d(0, 0, 1.5 * 0.25 * probe.radius);  // stages of a quarter radius: two
   double factorization_s = 0;
   auto at_six_tenths = [&](const Eigen::Vector3d& to) {
-    auto m = std::make_unique<LiverModel>(load_scene_mesh(s), s);
-    m->set_load_scale(0.6);
-    const StepResult r = m->step();
-    EXPECT_TRUE(r.converged());
-    factorization_s = 1e-3 * r.timing.factorization_ms / r.factorizations;
-    SolverOptions o = s.solver;
-    o.max_iterations = 1;
-    EXPECT_EQ(m->set_solver_options(o), "");
-    m->set_load_scale(1.0);
+    auto m = partly_loaded(s, 0.6, 1, std::numeric_limits<double>::infinity(), &factorization_s);
     InstrumentOptions moved = probe;
     moved.position = to;
     m->update_instrument(0, moved);
