@@ -258,6 +258,21 @@ std::unique_ptr<LiverModel> partly_loaded(const Scene& s, double scale, int iter
   return m;
 }
 
+// A step of `late` whose refresh of the factor needs more time than it has left (a budget of a
+// quarter of the factorisation its own first step timed): one iteration, no factorisation, out
+// of time, where `one` (an unlimited step of one iteration) ended.
+void step_past_a_refresh(LiverModel& late, double factorization_s, const LiverModel& one) {
+  SolverOptions o = late.solver_options();
+  o.time_budget = 0.25 * factorization_s;
+  ASSERT_EQ(late.set_solver_options(o), "");
+  const StepResult deferred = late.step();
+  EXPECT_EQ(deferred.status, StepResult::Status::NotConverged) << deferred.message;
+  EXPECT_TRUE(deferred.out_of_time);
+  EXPECT_EQ(deferred.iterations, 1);
+  EXPECT_EQ(deferred.factorizations, 0);
+  EXPECT_EQ(late.positions(), one.positions());
+}
+
 // Modified Newton on the factor of a tenth of the suction, asked for the full suction in one
 // iteration: that factor finds no descent, and the iteration is redone on a new factor. With an
 // unlimited budget the step refactorises and moves. Past its budget the step must not start the
@@ -314,15 +329,7 @@ TEST(TimeBudget, ARefreshAfterTheFirstIterationThatDoesNotFitStartsTheNextStep) 
   ASSERT_EQ(two->step().factorizations, 1) << "the first iteration contracted well: the scene no longer tests the refresh";
 
   std::unique_ptr<LiverModel> late = at_six_tenths(2, unlimited);
-  SolverOptions o = late->solver_options();
-  o.time_budget = 0.25 * factorization_s;  // as its own first step timed it
-  ASSERT_EQ(late->set_solver_options(o), "");
-  const StepResult deferred = late->step();
-  EXPECT_EQ(deferred.status, StepResult::Status::NotConverged) << deferred.message;
-  EXPECT_TRUE(deferred.out_of_time);
-  EXPECT_EQ(deferred.iterations, 1);
-  EXPECT_EQ(deferred.factorizations, 0);
-  EXPECT_EQ(late->positions(), one->positions());
+  step_past_a_refresh(*late, factorization_s, *one);
   EXPECT_EQ(late->step().factorizations, 1);
 }
 
@@ -363,15 +370,7 @@ TEST(TimeBudget, ARefreshThatDoesNotFitAtALaterStageEndsTheStepBetweenStages) {
   ASSERT_EQ(one->step().factorizations, 0);
 
   std::unique_ptr<LiverModel> late = at_six_tenths(target);
-  SolverOptions o = late->solver_options();
-  o.time_budget = 0.25 * factorization_s;  // as its own first step timed it
-  ASSERT_EQ(late->set_solver_options(o), "");
-  const StepResult deferred = late->step();
-  EXPECT_EQ(deferred.status, StepResult::Status::NotConverged) << deferred.message;
-  EXPECT_TRUE(deferred.out_of_time);
-  EXPECT_EQ(deferred.iterations, 1);
-  EXPECT_EQ(deferred.factorizations, 0);
-  EXPECT_EQ(late->positions(), one->positions());
+  step_past_a_refresh(*late, factorization_s, *one);
   EXPECT_LE((late->contact().pose(0).translation() - 0.5 * (start + target)).norm(), 1e-12)
       << late->contact().pose(0).translation().transpose();
   EXPECT_EQ(late->step().factorizations, 1);
