@@ -321,8 +321,8 @@ MUTATIONS = [
       "    if (\n        (Clock::now() > deadline_ ||",
       "out of time before the step's first iteration (no frame moves on)"),
     M("R4", "src/core/newton_stepper.cpp",
-      "if (k > 1 && (Clock::now() > deadline_ || (!factor_valid_ && !factorization_fits()))) {",
-      "if (k > 1 && false) {",
+      "if (k > 1 && (Clock::now() > deadline_ || (result.status != StepResult::Status::Converged &&",
+      "if (k > 1 && (false && (result.status != StepResult::Status::Converged &&",
       "out of time between stages ignored (the instruments reach their target, the tissue does not)"),
     M("R5", "src/core/newton_stepper.cpp",
       "      if (!factorization_fits()) {",
@@ -341,8 +341,8 @@ MUTATIONS = [
       "(false)",
       "a factor judged stale after a step's first iteration is refreshed in the same step past the budget"),
     M("R9", "src/core/newton_stepper.cpp",
-      "if (k > 1 && (Clock::now() > deadline_ || (!factor_valid_ && !factorization_fits()))) {",
-      "if (k > 1 && Clock::now() > deadline_) {",
+      "                                                factorizes(iteration_strategy()) && !factorization_fits()))) {",
+      "                                                false))) {",
       "a later stage starts with a factorisation past the budget"),
 ]
 

@@ -146,6 +146,9 @@ class NewtonStepper {
   double merit(double residual_norm, const Eigen::VectorXd& x) const;
   // Whether a factorisation as long as the last one would end before the step's deadline.
   bool factorization_fits() const;
+  // The strategy of the next iteration, and whether that iteration starts with a factorisation.
+  SolverOptions::Strategy iteration_strategy() const;
+  bool factorizes(SolverOptions::Strategy strategy) const;
   // Newton iterations from the current state; adds to result (iterations, timings, status).
   // contacts_detected: the contacts are already those of the current state. Past the time
   // budget it stops.

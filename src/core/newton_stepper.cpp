@@ -256,10 +256,13 @@ StepResult NewtonStepper::advance() {
   bool rotations_predicted = false;
   for (int k = 1; k <= stages && result.status != StepResult::Status::Diverged && !result.out_of_time; ++k) {
     // Out of time between stages, or a stage that would start with a factorisation the time left
-    // cannot hold (the last stage's iteration found its factor poor): the step ends at the last
+    // cannot hold (the last stage ended short of convergence, so this one iterates, and its first
+    // iteration factorises: a factor judged stale, or full Newton): the step ends at the last
     // stage, where the state and the instruments are consistent, and the next step starts with
-    // the factorisation. A factorisation here overran the real-time frame by its whole length.
-    if (k > 1 && (Clock::now() > deadline_ || (!factor_valid_ && !factorization_fits()))) {
+    // the factorisation. A factorisation here overran the real-time frame by its whole length. A
+    // stage that converged leaves the next to run: in free space it needs no iteration.
+    if (k > 1 && (Clock::now() > deadline_ || (result.status != StepResult::Status::Converged &&
+                                                factorizes(iteration_strategy()) && !factorization_fits()))) {
       result.status = StepResult::Status::NotConverged;
       result.message = "time budget";
       result.out_of_time = true;
@@ -363,6 +366,20 @@ void NewtonStepper::refresh_in_background(StepResult& result) {
 
 bool NewtonStepper::factorization_fits() const { return Clock::now() + factorization_time_ <= deadline_; }
 
+SolverOptions::Strategy NewtonStepper::iteration_strategy() const {
+  // With contacts, the strategies that solve with the factor carry the contact forces in the
+  // same solve; the others become Newton-Krylov, which has the factor too.
+  using Strategy = SolverOptions::Strategy;
+  const bool direct = solver_.strategy == Strategy::ModifiedNewton || solver_.strategy == Strategy::FullNewton;
+  return contact_.active() && !direct ? Strategy::NewtonKrylov : solver_.strategy;
+}
+
+bool NewtonStepper::factorizes(SolverOptions::Strategy strategy) const {
+  using Strategy = SolverOptions::Strategy;
+  const bool uses_factor = strategy != Strategy::FullNewtonEigen && strategy != Strategy::CG;
+  return uses_factor && (!factor_valid_ || strategy == Strategy::FullNewton);  // full Newton in every iteration
+}
+
 double NewtonStepper::merit(double residual_norm, const Eigen::VectorXd& x) const {
   // A contact violation counts as the force that a stiffness E L would need to close it.
   const double k = mechanics_.parenchyma().young_modulus * mechanics_.length_scale() * contact_.violation(x);
@@ -422,16 +439,12 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
       break;
     }
     using Strategy = SolverOptions::Strategy;
-    // With contacts, the strategies that solve with the factor carry the contact forces in the
-    // same solve; the others become Newton-Krylov, which has the factor too.
     const bool direct = solver_.strategy == Strategy::ModifiedNewton || solver_.strategy == Strategy::FullNewton;
-    const Strategy strategy = contact_.active() && !direct ? Strategy::NewtonKrylov : solver_.strategy;
+    const Strategy strategy = iteration_strategy();
     const bool current_tangent = strategy == Strategy::FullNewton || strategy == Strategy::FullNewtonEigen ||
                                  strategy == Strategy::ReusedFactorCG || strategy == Strategy::CG;
-    const bool uses_factor = strategy != Strategy::FullNewtonEigen && strategy != Strategy::CG;
     if (strategy == Strategy::ModifiedNewton && solver_.background_refresh && factor_valid_) refresh_in_background(result);
-    // This iteration factorises (full Newton in every one).
-    const bool fresh_factor = uses_factor && (!factor_valid_ || strategy == Strategy::FullNewton);
+    const bool fresh_factor = factorizes(strategy);
     // Out of time: the iterate is kept, judged as at the cap (a stall needs kStallIterations
     // iterations to judge). The first iteration of a step always runs, so that every frame moves
     // on. After an iteration of the same stage (a stage's start has moved its instruments), a
