@@ -132,4 +132,5 @@ TEST(FrameClock, LateFramesCatchUpWithTheGridAndAHoldUpDropsItsSlots) {
   EXPECT_EQ(clock.next(t0 + 435ms), t0 + 440ms);
   EXPECT_THROW(liver_sim::FrameClock(0.0, 2), std::invalid_argument);
   EXPECT_THROW(liver_sim::FrameClock(0.03, -1), std::invalid_argument);
+  EXPECT_THROW(liver_sim::FrameClock(std::nan(""), 2), std::invalid_argument);
 }

@@ -16,9 +16,9 @@ class FrameClock {
  public:
   using Clock = std::chrono::steady_clock;
   // The real-time loops' (the node, bench --paced): a factorisation on the phantom makes a
-  // frame one to two periods late; a step held up longer drops its slots.
+  // frame one to two periods long; a step held up longer drops its slots.
   static constexpr int kCatchUp = 3;
-  // Throws std::invalid_argument unless period is in (0, 1e6] s and catch_up >= 0.
+  // Throws std::invalid_argument unless period is in [1e-6, 1e6] s and catch_up in [0, 1000].
   FrameClock(double period, int catch_up, Clock::time_point start = Clock::now());
 
   // When the next frame starts, for a frame that ended at `now`; moves the grid on by a slot.

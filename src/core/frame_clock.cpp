@@ -7,12 +7,12 @@
 namespace liver_sim {
 
 FrameClock::FrameClock(double period, int catch_up, Clock::time_point start) : catch_up_(catch_up), slot_(start) {
-  if (catch_up < 0) throw std::invalid_argument("FrameClock: catch_up must be >= 0 periods");
+  if (catch_up < 0 || catch_up > 1000) throw std::invalid_argument("FrameClock: catch_up must be in [0, 1000] periods");
   set_period(period);
 }
 
 void FrameClock::set_period(double period) {
-  if (!(period > 0 && period <= 1e6)) throw std::invalid_argument("FrameClock: period must be in (0, 1e6] s");
+  if (!(period >= 1e-6 && period <= 1e6)) throw std::invalid_argument("FrameClock: period must be in [1e-6, 1e6] s");
   period_ = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(period));
 }
 
