@@ -20,7 +20,7 @@ using liver_sim_test::wait_for;
 liver_sim::SimulationStatus status;
 visualization_msgs::Marker mesh, vessels;
 int status_count = 0, mesh_count = 0, vessel_count = 0;
-// Heartbeats ("busy": a frame in progress and no status for one frame) that did not repeat the status before them.
+// Heartbeats ("busy": a long frame in progress and no status for one frame) that did not repeat the status before them.
 int busy_count = 0, busy_not_a_repeat = 0;
 
 void on_status(const liver_sim::SimulationStatus::ConstPtr& m) {

@@ -401,6 +401,11 @@ class LiverSimNode {
   // A dynamic_reconfigure change (bounded by the config's limits): all of it, or nothing when the
   // model refuses a part (the server then shows the values in force). True when the model changed.
   bool reconfigure(const LiverSimConfig& c, FrameClock& loop) {
+    if (!(c.rate >= 1 && c.rate <= 1000) || !(c.publish_rate >= 0.1 && c.publish_rate <= 100)) {  // NaN passes the server's clamp
+      reject("reconfigure: rate must be in [1, 1000] Hz, publish_rate in [0.1, 100] Hz");
+      reconfigure_->updateConfig(current_config());
+      return false;
+    }
     const SolverOptions solver_before = model_->solver_options();
     const ContactOptions contact_before = model_->contact().options();
     const double stiffness_before = registration_->options().stiffness;
@@ -424,7 +429,7 @@ class LiverSimNode {
     const bool model_changed = solver.strategy != solver_before.strategy ||
                                solver.max_iterations != solver_before.max_iterations ||
                                solver.tolerance != solver_before.tolerance || contact.friction != contact_before.friction;
-    if (c.rate != rate_) loop.set_period(1.0 / c.rate);
+    loop.set_period(1.0 / c.rate);
     rate_ = c.rate;
     publish_rate_ = c.publish_rate;
     display_due_ |= color_scale_max_ != c.color_scale_max || surface_alpha_ != c.surface_alpha;
@@ -678,18 +683,21 @@ class LiverSimNode {
     instruments_->publish(*model_, s.header);
   }
 
-  // While a frame runs (a factorisation, a part of the analysis) and no status went out for one
-  // frame, ~status keeps the loop's rate: the last step's status again, state "busy", every
+  // While a long frame runs (a factorisation, a part of the analysis) and no status went out for
+  // one frame, ~status keeps the loop's rate: the last step's status again, state "busy", every
   // frame, so that a guidance stack watching it sees a live node whose mesh is its last good
   // state. (heartbeat thread)
   void heartbeat() {
     std::lock_guard<std::mutex> lock(status_mutex_);
     const ros::WallTime now = ros::WallTime::now();
     const ros::WallDuration period(frame_period_);
-    // One frame since the last status, counted from that status and not from the frame's start:
-    // a frame that starts after the loop slept out its slot would otherwise leave up to two
-    // frames without one.
-    if (frame_start_.isZero() || last_status_time_.isZero() || now - last_status_time_ < period) return;
+    // One frame since the last status, counted from that status: from the frame's start, a frame
+    // that starts after the loop slept out its slot leaves up to two frames without one. The
+    // frame must have run half a frame, so that a short frame (one that only takes inputs, its
+    // status due at ~publish_rate) is not called busy.
+    if (frame_start_.isZero() || last_status_time_.isZero() || now - last_status_time_ < period ||
+        now - frame_start_ < period * 0.5)
+      return;
     SimulationStatus s = last_status_;
     s.header.stamp = ros::Time::now();
     s.state = "busy";
