@@ -439,8 +439,8 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
       break;
     }
     using Strategy = SolverOptions::Strategy;
-    const bool direct = solver_.strategy == Strategy::ModifiedNewton || solver_.strategy == Strategy::FullNewton;
     const Strategy strategy = iteration_strategy();
+    const bool direct = strategy == Strategy::ModifiedNewton || strategy == Strategy::FullNewton;  // contacts in the solve
     const bool current_tangent = strategy == Strategy::FullNewton || strategy == Strategy::FullNewtonEigen ||
                                  strategy == Strategy::ReusedFactorCG || strategy == Strategy::CG;
     if (strategy == Strategy::ModifiedNewton && solver_.background_refresh && factor_valid_) refresh_in_background(result);
