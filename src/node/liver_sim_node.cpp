@@ -46,6 +46,13 @@
 namespace liver_sim {
 namespace {
 
+// The loop's rates, checked where they are set (parameters, dynamic_reconfigure, whose clamp lets
+// NaN through): empty when valid.
+std::string rates_error(double rate, double publish_rate) {
+  if (rate >= 1 && rate <= 1000 && publish_rate >= 0.1 && publish_rate <= 100) return "";
+  return "rate must be in [1, 1000] Hz, publish_rate in [0.1, 100] Hz";
+}
+
 std::string scalar_text(const XmlRpc::XmlRpcValue& v) {
   std::ostringstream s;
   s.precision(17);
@@ -78,8 +85,7 @@ class LiverSimNode {
     pnh.param("publish_rate", publish_rate_, 15.0);
     pnh.param("color_scale_max", color_scale_max_, 0.005);
     pnh.param("surface_alpha", surface_alpha_, 1.0);
-    if (!(rate_ >= 1 && rate_ <= 1000) || !(publish_rate_ >= 0.1 && publish_rate_ <= 100))
-      throw std::invalid_argument("~rate must be in [1, 1000] Hz, ~publish_rate in [0.1, 100] Hz");
+    if (const std::string error = rates_error(rate_, publish_rate_); !error.empty()) throw std::invalid_argument("~" + error);
     if (!(color_scale_max_ > 0)) throw std::invalid_argument("~color_scale_max must be > 0");
     // A step stops at its time budget (SolverOptions::time_budget), one frame by default, so that
     // the loop keeps its rate whatever the solver does.
@@ -401,8 +407,8 @@ class LiverSimNode {
   // A dynamic_reconfigure change (bounded by the config's limits): all of it, or nothing when the
   // model refuses a part (the server then shows the values in force). True when the model changed.
   bool reconfigure(const LiverSimConfig& c, FrameClock& loop) {
-    if (!(c.rate >= 1 && c.rate <= 1000) || !(c.publish_rate >= 0.1 && c.publish_rate <= 100)) {  // NaN passes the server's clamp
-      reject("reconfigure: rate must be in [1, 1000] Hz, publish_rate in [0.1, 100] Hz");
+    if (const std::string error = rates_error(c.rate, c.publish_rate); !error.empty()) {
+      reject("reconfigure: " + error);
       reconfigure_->updateConfig(current_config());
       return false;
     }
