@@ -70,6 +70,10 @@ class LiverModel {
   // a triangle out of range or non-finite values. reset() removes them.
   void set_surface_targets(std::vector<SurfaceTarget> targets);
   const std::vector<SurfaceTarget>& surface_targets() const { return mechanics_.surface_targets(); }
+  // Surface loads the registration found (MechanicalModel::set_surface_loads), acting at the
+  // next step with the springs; reset() removes them.
+  void set_surface_loads(Eigen::VectorXd loads);
+  const Eigen::VectorXd& surface_loads() const { return mechanics_.surface_loads(); }
 
   // The next Newton iteration factorises the matrix afresh (a retry after a step that stalled
   // on an older factor).

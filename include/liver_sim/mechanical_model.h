@@ -75,7 +75,8 @@ class MechanicalModel {
   double elastic_energy(const Eigen::VectorXd& x);
   // External forces at positions x (follower pressure on the current triangles), unscaled.
   void external_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
-  // Adds the surface springs' forces at positions x to f.
+  // Adds the registration's forces to f: the surface springs' at positions x and the surface
+  // loads.
   void add_target_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
   // The values (in pattern()) of k K + m M + the springs' stiffness, K the tangent at the last
   // internal_forces call and M the lumped mass, with identity rows and columns at the supports.
@@ -118,8 +119,13 @@ class MechanicalModel {
   void set_surface_targets(std::vector<SurfaceTarget> targets);
   const std::vector<SurfaceTarget>& surface_targets() const { return surface_targets_; }
   double spring_stiffness() const;  // sum over the springs (N/m)
+  // Replaces the surface loads: dead nodal forces (N, 3 #V, or empty: none) the registration
+  // found on the surface the camera does not see. Throws std::invalid_argument for a wrong size
+  // or a non-finite value.
+  void set_surface_loads(Eigen::VectorXd loads);
+  const Eigen::VectorXd& surface_loads() const { return surface_loads_; }
 
-  // Back to the rest rotations (identity guesses) and no springs.
+  // Back to the rest rotations (identity guesses), no springs and no surface loads.
   void reset();
 
   // What a step leaves behind here: the element rotations with the polar iterations' warm
@@ -206,6 +212,7 @@ class MechanicalModel {
   Eigen::Vector3d gravity_ = Eigen::Vector3d::Zero();  // m/s^2, acting on the lumped masses
   std::vector<Probe> probes_;
   std::vector<SurfaceTarget> surface_targets_;
+  Eigen::VectorXd surface_loads_;
   // The last internal_forces call: positions (whose rotations are current) and forces, and the
   // strain energy of its tetrahedra and membranes (J).
   Eigen::VectorXd rotations_at_, internal_at_;

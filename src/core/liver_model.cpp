@@ -41,6 +41,11 @@ void LiverModel::set_surface_targets(std::vector<SurfaceTarget> targets) {
   stepper_.model_changed(/*refactorize=*/std::abs(after - before) > 0.5 * std::max(after, before));
 }
 
+void LiverModel::set_surface_loads(Eigen::VectorXd loads) {
+  mechanics_.set_surface_loads(std::move(loads));
+  stepper_.model_changed(/*refactorize=*/false);  // dead loads: the tangent stays
+}
+
 void LiverModel::reset() {
   mechanics_.reset();
   contact_.reset();

@@ -235,6 +235,7 @@ void MechanicalModel::reset() {
   tetra_.reset_rotations();
   rotations_at_.resize(0);
   surface_targets_.clear();
+  surface_loads_.resize(0);
 }
 
 void MechanicalModel::save(EvaluationState& s) const {
@@ -385,6 +386,14 @@ void MechanicalModel::set_surface_targets(std::vector<SurfaceTarget> targets) {
   surface_targets_ = std::move(targets);
 }
 
+void MechanicalModel::set_surface_loads(Eigen::VectorXd loads) {
+  if (loads.size() != 0 && loads.size() != X_.size())
+    throw std::invalid_argument("surface loads: " + std::to_string(loads.size()) + " values for " +
+                                std::to_string(X_.size()) + " degrees of freedom");
+  if (!loads.allFinite()) throw std::invalid_argument("surface loads: a value is not finite");
+  surface_loads_ = std::move(loads);
+}
+
 double MechanicalModel::spring_stiffness() const {
   double total = 0;
   for (const SurfaceTarget& t : surface_targets_) total += t.stiffness;
@@ -399,6 +408,7 @@ void MechanicalModel::add_target_forces(const Eigen::VectorXd& x, Eigen::VectorX
         -t.stiffness * (t.normal.isZero(0.0) ? on_surface : Eigen::Vector3d(t.normal * t.normal.dot(on_surface)));
     for (int j = 0; j < 3; ++j) f.segment<3>(3 * boundary_(t.triangle, j)) += t.weights[j] * pull;
   }
+  if (surface_loads_.size() != 0) f += surface_loads_;
 }
 
 void MechanicalModel::snapshot_damping(const Eigen::VectorXd& x) {

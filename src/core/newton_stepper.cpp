@@ -125,7 +125,7 @@ double NewtonStepper::work_over_step() {
   mechanics_.external_forces(x_, energy_work_);
   f_ext_ = 0.5 * load_scale_ * (f_ext_ + energy_work_);
   contact_.add_forces(x_, f_ext_);
-  if (!mechanics_.surface_targets().empty()) {
+  if (!mechanics_.surface_targets().empty() || mechanics_.surface_loads().size() != 0) {
     energy_work_.setZero();
     mechanics_.add_target_forces(x_start_, energy_work_);
     mechanics_.add_target_forces(x_, energy_work_);
