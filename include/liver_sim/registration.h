@@ -140,14 +140,31 @@ class SurfaceRegistration {
   // Costs one solve with one column.
   double estimate_tissue_stiffness(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs);
 
+  // Loads on the surface the camera does not see (options.estimate_hidden_loads): the surface it
+  // sees is free of forces (but for the instruments), so the springs' net pull r_p on the
+  // patches they touch is what the model lacks, and in surgery the forces that deform the liver
+  // act where the camera does not look (the diaphragm, a retractor, a ligament). One damped
+  // Gauss-Newton step on a force per untouched patch (its unit force spread as in
+  // SurfacePatches), g, linearised at the state `compliance` was factorised at with its springs
+  // (as estimate_supports): g moves the state by A^-1 Phi g, which changes r_p by J_p g;
+  // minimises sum_p w_p |r_p + J_p dg|^2 + lambda |g + dg|^2, w_p Huber weights of width twice
+  // the median |r_p| (as the stiffness estimate), lambda = options.hidden_load_damping times
+  // the mean diagonal of J^T W J (the loads stay the smallest that explain the pull). Patches
+  // the springs touch carry no load. Applied to the model (LiverModel::set_surface_loads) from
+  // its next step; successive calls converge. Returns the loads' total magnitude (N, the sum of
+  // the patches' |g|). Costs one solve with three columns per untouched patch.
+  double estimate_hidden_loads(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs);
+  // Per patch (SurfacePatches of options.uncertainty.patch_spacing), its hidden load (N).
+  const std::vector<Eigen::Vector3d>& hidden_loads() const { return hidden_loads_; }
+
   // Per candidate: held, and the share of the springs' pull it took away when last tried.
   const std::vector<bool>& supports_held() const { return held_; }
   const std::vector<double>& support_gains() const { return gains_; }
   // The springs of the cloud alone (the model's springs also hold the held supports).
   const std::vector<SurfaceTarget>& cloud_springs() const { return cloud_springs_; }
 
-  // Removes the springs (the model relaxes at its next step), lets the supports go, forgets
-  // the rigid alignment and puts the tissue's stiffness factor back to 1.
+  // Removes the springs and the hidden loads (the model relaxes at its next step), lets the
+  // supports go, forgets the rigid alignment and puts the tissue's stiffness factor back to 1.
   void clear();
   // The rigid alignment applied to every cloud (identity unless options.rigid_alignment).
   const Eigen::Isometry3d& alignment() const { return alignment_; }
@@ -219,9 +236,10 @@ class SurfaceRegistration {
     std::vector<double> weights;  // per node, by area, summing to 1
   };
   std::vector<Candidate> supports_;
-  SurfacePatches patches_;  // where the springs' pull is gathered (with candidates or the stiffness estimate)
+  SurfacePatches patches_;  // where the springs' pull is gathered (with candidates, the stiffness or the loads estimate)
   std::vector<bool> held_;
   std::vector<double> gains_;
+  std::vector<Eigen::Vector3d> hidden_loads_;  // per patch (N)
 };
 
 }  // namespace liver_sim

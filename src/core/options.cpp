@@ -178,6 +178,7 @@ std::string validate(const RegistrationOptions& o) {
        std::isfinite(o.max_tissue_stiffness_factor) && o.max_tissue_stiffness_factor >= 1
            ? ""
            : message("registration.max_tissue_stiffness_factor", ">= 1", o.max_tissue_stiffness_factor),
+       within("registration.hidden_load_damping", o.hidden_load_damping, 1e-6, 1e3, "in [1e-6, 1e3]"),
        within("registration.uncertainty.patch_spacing", o.uncertainty.patch_spacing, 1e-3, 1, "in [1e-3, 1] m"),
        non_negative("registration.uncertainty.force_ratio", o.uncertainty.force_ratio),
        non_negative("registration.uncertainty.stiffness_log_sd", o.uncertainty.stiffness_log_sd)});

@@ -11,6 +11,20 @@
 namespace liver_sim {
 namespace {
 
+// Huber weights over the patches' pulls, of width twice the median of the nonzero ones (zero
+// pulls weigh nothing): an instrument pressing where the camera sees does not decide a fit.
+std::vector<double> patch_weights(const std::vector<Eigen::Vector3d>& pull) {
+  std::vector<double> sizes, w(pull.size(), 0.0);
+  for (const Eigen::Vector3d& r : pull)
+    if (r.squaredNorm() > 0) sizes.push_back(r.norm());
+  if (sizes.empty()) return w;
+  std::nth_element(sizes.begin(), sizes.begin() + sizes.size() / 2, sizes.end());
+  const double width = 2 * sizes[sizes.size() / 2];
+  for (size_t p = 0; p < pull.size(); ++p)
+    if (pull[p].squaredNorm() > 0) w[p] = pull[p].norm() <= width ? 1.0 : width / pull[p].norm();
+  return w;
+}
+
 using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
@@ -83,8 +97,9 @@ SurfaceRegistration::SurfaceRegistration(LiverModel& model, const RegistrationOp
   }
   held_.assign(supports_.size(), false);
   gains_.assign(supports_.size(), 0.0);
-  if (!supports_.empty() || options.estimates_tissue_stiffness())
+  if (!supports_.empty() || options.estimates_tissue_stiffness() || options.estimate_hidden_loads)
     patches_ = make_surface_patches(model.mechanics(), options.uncertainty.patch_spacing);
+  hidden_loads_.assign(patches_.centres.size(), Eigen::Vector3d::Zero());
 }
 
 void SurfaceRegistration::apply_springs() {
@@ -152,20 +167,12 @@ double SurfaceRegistration::estimate_tissue_stiffness(StateCompliance& complianc
   Eigen::MatrixXd u;
   compliance.solve(-compliance.internal_forces(), u);  // d x / d ln s
   const std::vector<Eigen::Vector3d> moved = patch_spring_forces(patches_, F, springs, x + u.col(0));
-  // Huber weights over the patches the springs touch, of width twice their median pull: an
-  // instrument pressing where the camera sees does not decide the tissue's stiffness.
-  std::vector<double> sizes;
-  for (const Eigen::Vector3d& r : pull)
-    if (r.squaredNorm() > 0) sizes.push_back(r.norm());
-  if (sizes.empty()) return scale;
-  std::nth_element(sizes.begin(), sizes.begin() + sizes.size() / 2, sizes.end());
-  const double width = 2 * sizes[sizes.size() / 2];
+  const std::vector<double> w = patch_weights(pull);
   double along = 0, squared = 0;
   for (size_t p = 0; p < pull.size(); ++p) {
     const Eigen::Vector3d J = moved[p] - pull[p];  // the springs are linear in x
-    const double w = pull[p].norm() <= width ? 1.0 : width / pull[p].norm();
-    along += w * J.dot(pull[p]);
-    squared += w * J.squaredNorm();
+    along += w[p] * J.dot(pull[p]);
+    squared += w[p] * J.squaredNorm();
   }
   if (!(squared > 0)) return scale;
   const double step = std::clamp(-along / squared, -std::log(2.0), std::log(2.0));
@@ -175,8 +182,62 @@ double SurfaceRegistration::estimate_tissue_stiffness(StateCompliance& complianc
   return estimate;
 }
 
+double SurfaceRegistration::estimate_hidden_loads(StateCompliance& compliance,
+                                                  const std::vector<SurfaceTarget>& springs) {
+  if (!options_.estimate_hidden_loads || springs.empty()) return 0.0;
+  const Eigen::VectorXd& x = compliance.state();
+  const Eigen::MatrixX3i& F = model_.boundary();
+  std::vector<char> touched(patches_.centres.size(), 0);
+  for (const SurfaceTarget& t : springs) touched[patches_.triangle_patch[t.triangle]] = 1;
+  std::vector<int> hidden;
+  for (size_t p = 0; p < patches_.centres.size(); ++p) {
+    if (touched[p]) hidden_loads_[p].setZero();  // the surface in view carries no load
+    else if (!patches_.nodes[p].empty()) hidden.push_back(static_cast<int>(p));
+  }
+  const std::vector<Eigen::Vector3d> pull = patch_spring_forces(patches_, F, springs, x);
+  const std::vector<double> w = patch_weights(pull);
+  const int n = 3 * static_cast<int>(hidden.size());
+  if (n > 0) {
+    Eigen::MatrixXd Phi = Eigen::MatrixXd::Zero(x.size(), n), U;
+    for (size_t k = 0; k < hidden.size(); ++k) {
+      const int p = hidden[k];
+      for (size_t i = 0; i < patches_.nodes[p].size(); ++i)
+        for (int a = 0; a < 3; ++a) Phi(3 * patches_.nodes[p][i] + a, 3 * k + a) = patches_.weights[p][i];
+    }
+    compliance.solve(Phi, U);
+    // J: the change of each touched patch's pull per unit load (the springs are linear in x).
+    Eigen::MatrixXd J(3 * pull.size(), n);
+    for (int c = 0; c < n; ++c) {
+      const std::vector<Eigen::Vector3d> moved = patch_spring_forces(patches_, F, springs, x + U.col(c));
+      for (size_t p = 0; p < pull.size(); ++p) J.block<3, 1>(3 * p, c) = std::sqrt(w[p]) * (moved[p] - pull[p]);
+    }
+    Eigen::VectorXd r(3 * pull.size()), g(n);
+    for (size_t p = 0; p < pull.size(); ++p) r.segment<3>(3 * p) = std::sqrt(w[p]) * pull[p];
+    for (size_t k = 0; k < hidden.size(); ++k) g.segment<3>(3 * k) = hidden_loads_[hidden[k]];
+    Eigen::MatrixXd N = J.transpose() * J;
+    const double lambda = options_.hidden_load_damping * N.trace() / n;
+    if (lambda > 0) {
+      N.diagonal().array() += lambda;
+      const Eigen::VectorXd step = N.ldlt().solve(-J.transpose() * r - lambda * g);
+      if (step.allFinite())
+        for (size_t k = 0; k < hidden.size(); ++k) hidden_loads_[hidden[k]] += step.segment<3>(3 * k);
+    }
+  }
+  Eigen::VectorXd loads = Eigen::VectorXd::Zero(x.size());
+  double total = 0;
+  for (size_t p = 0; p < patches_.centres.size(); ++p) {
+    total += hidden_loads_[p].norm();
+    for (size_t i = 0; i < patches_.nodes[p].size(); ++i)
+      loads.segment<3>(3 * patches_.nodes[p][i]) += patches_.weights[p][i] * hidden_loads_[p];
+  }
+  model_.set_surface_loads(std::move(loads));
+  return total;
+}
+
 void SurfaceRegistration::clear() {
   model_.set_stiffness_scale(1.0);
+  model_.set_surface_loads(Eigen::VectorXd());
+  hidden_loads_.assign(patches_.centres.size(), Eigen::Vector3d::Zero());
   model_.set_surface_targets({});
   cloud_springs_.clear();
   held_.assign(supports_.size(), false);

@@ -210,7 +210,7 @@ class Reader {
                                    "huber_width", "correspondence_updates", "frame_updates", "newton_iterations", "strategy",
                                    "rigid_alignment", "min_points", "min_coverage", "full_coverage",
                                    "candidate_supports", "support_stiffness", "support_gain", "min_tissue_stiffness_factor", "max_tissue_stiffness_factor",
-                                   "uncertainty"});
+                                   "estimate_hidden_loads", "hidden_load_damping", "uncertainty"});
     if (g["strategy"]) o.strategy = strategy(g["strategy"], "registration.strategy");
     if (g["newton_iterations"]) o.newton_iterations = integer(g["newton_iterations"], "registration.newton_iterations");
     if (g["stiffness"]) o.stiffness = number(g["stiffness"], "registration.stiffness");
@@ -241,6 +241,9 @@ class Reader {
       o.min_tissue_stiffness_factor = number(g["min_tissue_stiffness_factor"], "registration.min_tissue_stiffness_factor");
     if (g["max_tissue_stiffness_factor"])
       o.max_tissue_stiffness_factor = number(g["max_tissue_stiffness_factor"], "registration.max_tissue_stiffness_factor");
+    if (g["estimate_hidden_loads"])
+      o.estimate_hidden_loads = boolean(g["estimate_hidden_loads"], "registration.estimate_hidden_loads");
+    if (g["hidden_load_damping"]) o.hidden_load_damping = number(g["hidden_load_damping"], "registration.hidden_load_damping");
     if (const YAML::Node u = g["uncertainty"]) {
       check_keys(u, "registration.uncertainty", {"patch_spacing", "force_ratio", "stiffness_log_sd"});
       UncertaintyOptions& q = o.uncertainty;

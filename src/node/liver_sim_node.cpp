@@ -573,7 +573,7 @@ class LiverSimNode {
   }
 
   // A finished analysis, if one is: its covariances shown, and the registration's estimates
-  // (candidate supports, the tissue's stiffness) solved on its factor with the springs it was
+  // (candidate supports, the tissue's stiffness, the hidden loads) solved on its factor with the springs it was
   // made with. (simulation thread)
   void adopt_analysis() {
     std::optional<UncertaintyWorker::Result> result = analysis_->take();
@@ -590,8 +590,9 @@ class LiverSimNode {
       const int held = registration_->estimate_supports(analysis_->compliance(), result->cloud_springs);
       if (held >= 0) ROS_INFO("liver_sim: the clouds call for candidate support %d: held from the next cloud", held);
       registration_->estimate_tissue_stiffness(analysis_->compliance(), result->cloud_springs);  // both registration.*_tissue_stiffness_factor 1: off
+      registration_->estimate_hidden_loads(analysis_->compliance(), result->cloud_springs);  // registration.estimate_hidden_loads false: off
     } catch (const std::runtime_error& e) {
-      ROS_WARN_THROTTLE(5.0, "liver_sim: no support or stiffness estimate: %s", e.what());
+      ROS_WARN_THROTTLE(5.0, "liver_sim: no support, stiffness or hidden loads estimate: %s", e.what());
     }
   }
 
@@ -842,6 +843,10 @@ class LiverSimNode {
     stat.add("registration inlier fraction", registered_.inlier_fraction);
     stat.add("registration RMS of all points (m)", registered_.rms_all);
     stat.add("target 95% radius, largest (m)", largest_radius_95());
+    stat.add("tissue stiffness factor", model_->stiffness_scale());
+    double hidden = 0;
+    for (const Eigen::Vector3d& g : registration_->hidden_loads()) hidden += g.norm();
+    stat.add("hidden loads, sum of magnitudes (N)", hidden);
     stat.add("last cloud size", last_cloud_points_);
     stat.add("last cloud filter time (s)", last_cloud_filter_s_);
     stat.add("last rejection", last_rejection_);

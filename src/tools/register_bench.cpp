@@ -250,7 +250,7 @@ int main(int argc, char** argv) {
            "tre_unregistered_mean_mm,tre_unregistered_max_mm,tre_mean_mm,tre_p95_mm,tre_max_mm,tumour_mean_mm,"
            "tumour_p95_mm,tumour_max_mm,bifurcation_mean_mm,bifurcation_p95_mm,bifurcation_max_mm,"
            "frame_median_ms,frame_max_ms,filter_ms,correspondence_ms,solve_ms,newton_per_frame,diverged,worst_target,"
-           "inside_95,radius_95_mean_mm,spring_energy_uj,analysis_ms,supports,tissue_factor,frame_cpu_median_ms,analysis_cpu_ms\n";
+           "inside_95,radius_95_mean_mm,spring_energy_uj,analysis_ms,supports,tissue_factor,hidden_load_n,frame_cpu_median_ms,analysis_cpu_ms\n";
     out << std::setprecision(6);
     if (!opt.targets_csv.empty()) {
       target_file.open(opt.targets_csv);
@@ -303,7 +303,7 @@ int main(int argc, char** argv) {
               double inside = 0, energy = 0, analysis_ms = 0, analysis_cpu_ms = 0;
               std::string held;
               double achieved = 0, returned = 0, filter_ms = 0, correspondence_ms = 0, solve_ms = 0, coverage = 0;
-              double outlier_share = 0, tissue_factor = 0;
+              double outlier_share = 0, tissue_factor = 0, hidden_load = 0;
               int newton = 0, diverged = 0, cloud_points = 0;
               const int runs = opt.frames * opt.repeats;
               RegistrationFrame frame;
@@ -361,6 +361,7 @@ int main(int argc, char** argv) {
                   if (k == opt.frames) covariance = uncertainty.covariances(compliance, registration.cloud_springs());
                   registration.estimate_supports(compliance, registration.cloud_springs());
                   registration.estimate_tissue_stiffness(compliance, registration.cloud_springs());
+                  registration.estimate_hidden_loads(compliance, registration.cloud_springs());
                   analysis_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / runs;
                   analysis_cpu_ms += 1e3 * (std::clock() - c1) / CLOCKS_PER_SEC / runs;
                   frame_ms.push_back(frame.total_ms);
@@ -374,6 +375,7 @@ int main(int argc, char** argv) {
                 const std::vector<Eigen::Vector3d> registered = target_positions(model);
                 energy += spring_energy(model) / opt.repeats;
                 tissue_factor += model.stiffness_scale() / opt.repeats;
+                for (const Eigen::Vector3d& g : registration.hidden_loads()) hidden_load += g.norm() / opt.repeats;
                 held.clear();
                 for (size_t c = 0; c < registration.supports_held().size(); ++c) {
                   std::ostringstream gain;
@@ -411,7 +413,7 @@ int main(int argc, char** argv) {
                   << 1e3 * t.mean << "," << 1e3 * t.p95 << "," << 1e3 * t.max << "," << 1e3 * b.mean << "," << 1e3 * b.p95
                   << "," << 1e3 * b.max << "," << sorted[sorted.size() / 2] << "," << sorted.back() << "," << filter_ms << ","
                   << correspondence_ms << "," << solve_ms << "," << static_cast<double>(newton) / runs << "," << diverged
-                  << "," << worst_target << "," << inside << "," << 1e3 * stats(radius).mean << "," << 1e6 * energy << "," << analysis_ms << "," << held << "," << tissue_factor << "," << median(frame_cpu_ms) << "," << analysis_cpu_ms << "\n"
+                  << "," << worst_target << "," << inside << "," << 1e3 * stats(radius).mean << "," << 1e6 * energy << "," << analysis_ms << "," << held << "," << tissue_factor << "," << hidden_load << "," << median(frame_cpu_ms) << "," << analysis_cpu_ms << "\n"
                   << std::flush;
               if (!opt.quiet)
                 std::cerr << truth_name << " " << scenario_name << ": noise " << 1e3 * noise << " mm, visible " << achieved
