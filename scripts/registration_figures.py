@@ -11,6 +11,11 @@ OUT (default doc/):
   registration_grid_estimated.csv the same cases with the tissue's stiffness estimated from the
                                  clouds (registration.{min,max}_tissue_stiffness_factor 0.25, 4)
   registration_grid_stiffen.csv  the same, the clouds allowed to stiffen the model only (1, 4)
+  registration_grid_hidden_loads.csv the same cases with the hidden loads estimated
+                                 (registration.estimate_hidden_loads)
+  registration_sweep_hidden_loads.csv  the lift and the breathing, model 2x too soft and too
+                                 stiff, over depth noise and visible fraction, the stiffness
+                                 fixed (hidden_load_n 0) and with the hidden loads estimated
   registration_sweep.csv         the lift, model 2x too stiff: visible fraction and depth noise
   registration_crime.csv         the same sweep against the model's own lift (the inverse crime)
   registration_sweep_estimated.csv  the depth-noise sweep with the stiffness estimated
@@ -18,8 +23,9 @@ OUT (default doc/):
   registration_tre_noise.png     TRE against depth noise, truth and crime
   registration_tre_stiffness.png TRE p95 per scenario against the model's stiffness error,
                                  fixed and estimated
+  registration_tre_hidden_loads.png  the same, fixed and with the hidden loads estimated
 then prints the Markdown tables of doc/registration.md and the ellipsoids' calibration.
-Pin it: taskset -c 0 /usr/bin/python3 scripts/registration_figures.py   (about 20 min)
+Pin it: taskset -c 0 /usr/bin/python3 scripts/registration_figures.py   (about 40 min)
   --quick   2 frames, the lift only, one case per sweep (the smoke run)
 """
 import argparse
@@ -41,6 +47,7 @@ TRUTH_STIFFNESS = 0.5  # truth E over the model's (make_truth_phantom.py --stiff
 SCENARIOS = ["lift", "press", "breathing", "pneumoperitoneum"]
 ESTIMATE = ["--set", "registration.min_tissue_stiffness_factor=0.25", "--set", "registration.max_tissue_stiffness_factor=4"]
 STIFFEN = ["--set", "registration.min_tissue_stiffness_factor=1", "--set", "registration.max_tissue_stiffness_factor=4"]
+HIDDEN = ["--set", "registration.estimate_hidden_loads=true"]
 
 
 def fmt(values):
@@ -81,10 +88,10 @@ def plot_sweep(truth, crime, key, scale, xlabel, path):
     plt.close(fig)
 
 
-def plot_stiffness(grid, fixed, path):
+def plot_stiffness(grid, fixed, path, label):
     fig, ax = plt.subplots(figsize=(5, 3.6))
     for k, s in enumerate(SCENARIOS):
-        for rows, style, how in ((grid, "o-", "estimated"), (fixed, "s--", "fixed")):
+        for rows, style, how in ((grid, "o-", label), (fixed, "s--", "fixed")):
             rows = [r for r in rows if r["scenario"] == s]
             if rows:
                 ax.plot([float(r["stiffness_ratio"]) for r in rows], [float(r["tre_p95_mm"]) for r in rows], style,
@@ -114,13 +121,15 @@ def table(rows, first):
               f"| {float(r['stiffness_ratio']) * float(r['tissue_factor']):.2f} | {float(r['frame_cpu_median_ms']):.0f} ms |")
 
 
-def compare(grid, fixed):
-    print("| case | fixed: TRE mean | p95 | estimated: TRE mean | p95 | stiffness found |")
-    print("|---|---:|---:|---:|---:|---:|")
+def compare(grid, fixed, label="estimated", sweep=False):
+    print(f"| case | fixed: TRE mean | p95 | {label}: TRE mean | p95 | max | stiffness found | hidden loads | inside 95% |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for a, b in zip(fixed, grid):
-        print(f"| {a['scenario']}, model x{float(a['stiffness_ratio']):g} | {float(a['tre_mean_mm']):.2f} mm "
+        view = f", {100 * float(a['visible_fraction']):.0f}% visible, {1e3 * float(a['noise_m']):g} mm" if sweep else ""
+        print(f"| {a['scenario']}, model x{float(a['stiffness_ratio']):g}{view} | {float(a['tre_mean_mm']):.2f} mm "
               f"| {float(a['tre_p95_mm']):.2f} mm | {float(b['tre_mean_mm']):.2f} mm | {float(b['tre_p95_mm']):.2f} mm "
-              f"| {float(b['stiffness_ratio']) * float(b['tissue_factor']):.2f} |")
+              f"| {float(b['tre_max_mm']):.2f} mm | {float(b['stiffness_ratio']) * float(b['tissue_factor']):.2f} "
+              f"| {float(b['hidden_load_n']):.1f} N | {100 * float(b['inside_95']):.0f}% |")
 
 
 def main():
@@ -153,7 +162,19 @@ def main():
     stiffened = bench(args, ["--truth-scene", truth, "--scenario", ",".join(scenarios), "--stiffness", fmt(model_scales)]
                       + STIFFEN)
     write(stiffened, os.path.join(args.out, "registration_grid_stiffen.csv"))
+    hidden = bench(args, ["--truth-scene", truth, "--scenario", ",".join(scenarios), "--stiffness", fmt(model_scales)]
+                   + HIDDEN)
+    write(hidden, os.path.join(args.out, "registration_grid_hidden_loads.csv"))
     two = [f"{TRUTH_STIFFNESS * 2:g}"]
+    wrong = fmt([TRUTH_STIFFNESS * 0.5, TRUTH_STIFFNESS * 2])
+    sweep_h = []
+    for extra in ([], HIDDEN):  # the grid's 1 mm and 30% left out
+        for axis, values in (("--noise", [v for v in noise if v != 1e-3]), ("--visible", [v for v in visible if v != 0.3])):
+            if values:
+                sweep_h += bench(args, ["--truth-scene", truth, "--scenario", "lift,breathing", "--stiffness", wrong,
+                                        axis, fmt(values)] + extra)
+    if sweep_h:
+        write(sweep_h, os.path.join(args.out, "registration_sweep_hidden_loads.csv"))
     sweep_v = bench(args, ["--truth-scene", truth, "--stiffness", two[0], "--visible", fmt(visible)])
     sweep_n = bench(args, ["--truth-scene", truth, "--stiffness", two[0], "--noise", fmt(noise)])
     crime_v = bench(args, ["--visible", fmt(visible)])
@@ -164,7 +185,8 @@ def main():
     write(crime_v + crime_n, os.path.join(args.out, "registration_crime.csv"))
     plot_sweep(sweep_v, crime_v, "visible_fraction", 100, "visible surface (%)", os.path.join(args.out, "registration_tre_visible.png"))
     plot_sweep(sweep_n, crime_n, "noise_m", 1e3, "depth noise at 25 cm (mm)", os.path.join(args.out, "registration_tre_noise.png"))
-    plot_stiffness(estimated, grid, os.path.join(args.out, "registration_tre_stiffness.png"))
+    plot_stiffness(estimated, grid, os.path.join(args.out, "registration_tre_stiffness.png"), "estimated")
+    plot_stiffness(hidden, grid, os.path.join(args.out, "registration_tre_hidden_loads.png"), "hidden loads")
 
     print("\nIndependent truth, 30% visible, 1 mm depth noise:\n")
     table(grid, "grid")
@@ -172,6 +194,12 @@ def main():
     compare(estimated, grid)
     print("\nThe same cases, the model's stiffness fixed and stiffened only:\n")
     compare(stiffened, grid)
+    print("\nThe same cases, the model's stiffness fixed and with the hidden loads estimated:\n")
+    compare(hidden, grid, "hidden loads")
+    if sweep_h:
+        half = len(sweep_h) // 2
+        print("\nThe lift and the breathing over depth noise and visible fraction, fixed and with the hidden loads:\n")
+        compare(sweep_h[half:], sweep_h[:half], "hidden loads", sweep=True)
     print("\nThe lift, model 2x too stiff, over depth noise, the stiffness estimated:\n")
     table(sweep_e, "visible")
     print("\nIndependent truth, lift, model 2x too stiff:\n")
