@@ -149,13 +149,31 @@ class SurfaceRegistration {
   // (as estimate_supports): g moves the state by A^-1 Phi g, which changes r_p by J_p g;
   // minimises sum_p w_p |r_p + J_p dg|^2 + lambda |g + dg|^2, w_p Huber weights of width twice
   // the median |r_p| (as the stiffness estimate), lambda = options.hidden_load_damping times
-  // the mean diagonal of J^T W J (the loads stay the smallest that explain the pull). Patches
-  // the springs touch carry no load. Applied to the model (LiverModel::set_surface_loads) from
-  // its next step; successive calls converge. Returns the loads' total magnitude (N, the sum of
-  // the patches' |g|). Costs one solve with three columns per untouched patch.
+  // the mean diagonal of J^T W J (the loads stay the smallest that explain the pull). A patch
+  // the springs touch carries no load: one that had a load drops it, its effect on the pull
+  // counted in the step. Applied to the model (LiverModel::set_surface_loads) from its next
+  // step; successive calls converge. Returns hidden_load_total(). Costs one solve with three
+  // columns per untouched patch. It is apply_hidden_loads(hidden_load_fit(compliance, springs,
+  // hidden_loads())).
   double estimate_hidden_loads(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs);
-  // Per patch (SurfacePatches of options.uncertainty.patch_spacing), its hidden load (N).
+  // The linearised fit of that step, with `loads` as the current ones: its solves are the cost,
+  // and it reads nothing a registration changes after construction (the patches), so another
+  // thread may make it (the node's uncertainty worker). Empty when the estimate is off or there
+  // are no springs.
+  struct HiddenLoadFit {
+    std::vector<int> patches;  // three columns each: the `hidden` fitted ones, then those in view that had a load
+    int hidden = 0;
+    Eigen::MatrixXd J;         // the touched patches' pull per unit load, weighted (sqrt w_p)
+    Eigen::VectorXd r;         // their pull, weighted
+  };
+  HiddenLoadFit hidden_load_fit(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs,
+                                const std::vector<Eigen::Vector3d>& loads) const;
+  // The step from a fit made with the current hidden_loads(); returns hidden_load_total().
+  double apply_hidden_loads(const HiddenLoadFit& fit);
+  // Per patch (SurfacePatches of options.uncertainty.patch_spacing), its hidden load (N); their
+  // magnitudes' sum.
   const std::vector<Eigen::Vector3d>& hidden_loads() const { return hidden_loads_; }
+  double hidden_load_total() const;
 
   // Per candidate: held, and the share of the springs' pull it took away when last tried.
   const std::vector<bool>& supports_held() const { return held_; }

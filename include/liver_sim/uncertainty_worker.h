@@ -19,6 +19,7 @@
 
 #include "liver_sim/background_job.h"
 #include "liver_sim/liver_model.h"
+#include "liver_sim/registration.h"
 #include "liver_sim/state_compliance.h"
 #include "liver_sim/target_uncertainty.h"
 
@@ -36,15 +37,19 @@ class UncertaintyWorker {
 
   // Starts the analysis of `model`'s current state. `cloud_springs`: the cloud's springs among
   // the model's (SurfaceRegistration::cloud_springs); `tag`: the caller's, returned with the
-  // result. Returns false, starting nothing, while an analysis runs or its result awaits take().
-  // Throws std::invalid_argument, starting nothing, when the model refuses the capsule of
-  // set_capsule() (not tried again).
-  bool start(const LiverModel& model, std::vector<SurfaceTarget> cloud_springs, uint64_t tag);
+  // result. With `registration` (the caller's, registering `model`), the analysis also makes
+  // its hidden loads' fit (SurfaceRegistration::hidden_load_fit, with its hidden loads of now),
+  // for the caller to apply. Returns false, starting nothing, while an analysis runs or its
+  // result awaits take(). Throws std::invalid_argument, starting nothing, when the model
+  // refuses the capsule of set_capsule() (not tried again).
+  bool start(const LiverModel& model, std::vector<SurfaceTarget> cloud_springs, uint64_t tag,
+             const SurfaceRegistration* registration = nullptr);
 
   struct Result {
     uint64_t tag = 0;
     std::vector<TargetUncertainty::Covariance> covariances;  // of tracked_targets, in order; empty on error
     std::vector<SurfaceTarget> cloud_springs;                  // those handed to start()
+    SurfaceRegistration::HiddenLoadFit hidden_loads;           // empty without a registration or when off
     std::string error;  // why there are no covariances (a stiffness not positive definite, ...)
   };
   // The finished analysis, once; nothing while it runs or when none was started.
@@ -63,6 +68,8 @@ class UncertaintyWorker {
   std::mutex capsule_mutex_;
   std::optional<CapsuleOptions> capsule_;  // to apply at the next start()
   Result result_;
+  const SurfaceRegistration* registration_ = nullptr;  // of the analysis in progress
+  std::vector<Eigen::Vector3d> hidden_loads_;          // its hidden loads at start()
   BackgroundJob job_;  // last: destroyed first, waiting for an analysis in progress
 };
 

@@ -179,6 +179,11 @@ std::string validate(const RegistrationOptions& o) {
            ? ""
            : message("registration.max_tissue_stiffness_factor", ">= 1", o.max_tissue_stiffness_factor),
        within("registration.hidden_load_damping", o.hidden_load_damping, 1e-6, 1e3, "in [1e-6, 1e3]"),
+       // Each estimate takes the same pull away on the same factor: together they would
+       // correct it twice (not measured together).
+       o.estimate_hidden_loads && (o.estimates_tissue_stiffness() || !o.candidate_supports.empty())
+           ? "registration.estimate_hidden_loads: not with the tissue's stiffness estimated or candidate supports"
+           : "",
        within("registration.uncertainty.patch_spacing", o.uncertainty.patch_spacing, 1e-3, 1, "in [1e-3, 1] m"),
        non_negative("registration.uncertainty.force_ratio", o.uncertainty.force_ratio),
        non_negative("registration.uncertainty.stiffness_log_sd", o.uncertainty.stiffness_log_sd)});

@@ -184,53 +184,77 @@ double SurfaceRegistration::estimate_tissue_stiffness(StateCompliance& complianc
 
 double SurfaceRegistration::estimate_hidden_loads(StateCompliance& compliance,
                                                   const std::vector<SurfaceTarget>& springs) {
-  if (!options_.estimate_hidden_loads || springs.empty()) return 0.0;
+  return apply_hidden_loads(hidden_load_fit(compliance, springs, hidden_loads_));
+}
+
+SurfaceRegistration::HiddenLoadFit SurfaceRegistration::hidden_load_fit(StateCompliance& compliance,
+                                                                        const std::vector<SurfaceTarget>& springs,
+                                                                        const std::vector<Eigen::Vector3d>& loads) const {
+  HiddenLoadFit fit;
+  if (!options_.estimate_hidden_loads || springs.empty()) return fit;
   const Eigen::VectorXd& x = compliance.state();
   const Eigen::MatrixX3i& F = model_.boundary();
   std::vector<char> touched(patches_.centres.size(), 0);
   for (const SurfaceTarget& t : springs) touched[patches_.triangle_patch[t.triangle]] = 1;
-  std::vector<int> hidden;
-  for (size_t p = 0; p < patches_.centres.size(); ++p) {
-    if (touched[p]) hidden_loads_[p].setZero();  // the surface in view carries no load
-    else if (!patches_.nodes[p].empty()) hidden.push_back(static_cast<int>(p));
-  }
+  for (size_t p = 0; p < patches_.centres.size(); ++p)
+    if (!touched[p] && !patches_.nodes[p].empty()) fit.patches.push_back(static_cast<int>(p));
+  fit.hidden = static_cast<int>(fit.patches.size());
+  for (size_t p = 0; p < patches_.centres.size(); ++p)
+    if (touched[p] && !loads[p].isZero(0.0)) fit.patches.push_back(static_cast<int>(p));
   const std::vector<Eigen::Vector3d> pull = patch_spring_forces(patches_, F, springs, x);
   const std::vector<double> w = patch_weights(pull);
-  const int n = 3 * static_cast<int>(hidden.size());
+  const int n = 3 * static_cast<int>(fit.patches.size());
+  Eigen::MatrixXd Phi = Eigen::MatrixXd::Zero(x.size(), n), U;
+  for (size_t k = 0; k < fit.patches.size(); ++k) {
+    const int p = fit.patches[k];
+    for (size_t i = 0; i < patches_.nodes[p].size(); ++i)
+      for (int a = 0; a < 3; ++a) Phi(3 * patches_.nodes[p][i] + a, 3 * k + a) = patches_.weights[p][i];
+  }
+  if (n > 0) compliance.solve(Phi, U);
+  // J: the change of each touched patch's pull per unit load (the springs are linear in x).
+  fit.J.resize(3 * pull.size(), n);
+  for (int c = 0; c < n; ++c) {
+    const std::vector<Eigen::Vector3d> moved = patch_spring_forces(patches_, F, springs, x + U.col(c));
+    for (size_t p = 0; p < pull.size(); ++p) fit.J.block<3, 1>(3 * p, c) = std::sqrt(w[p]) * (moved[p] - pull[p]);
+  }
+  fit.r.resize(3 * pull.size());
+  for (size_t p = 0; p < pull.size(); ++p) fit.r.segment<3>(3 * p) = std::sqrt(w[p]) * pull[p];
+  return fit;
+}
+
+double SurfaceRegistration::apply_hidden_loads(const HiddenLoadFit& fit) {
+  if (fit.patches.empty()) return hidden_load_total();
+  // The patches now in view drop their loads, and the pull the fit sees changes by as much.
+  Eigen::VectorXd r = fit.r;
+  for (size_t k = fit.hidden; k < fit.patches.size(); ++k) {
+    r -= fit.J.middleCols(3 * k, 3) * hidden_loads_[fit.patches[k]];
+    hidden_loads_[fit.patches[k]].setZero();
+  }
+  const int n = 3 * fit.hidden;
   if (n > 0) {
-    Eigen::MatrixXd Phi = Eigen::MatrixXd::Zero(x.size(), n), U;
-    for (size_t k = 0; k < hidden.size(); ++k) {
-      const int p = hidden[k];
-      for (size_t i = 0; i < patches_.nodes[p].size(); ++i)
-        for (int a = 0; a < 3; ++a) Phi(3 * patches_.nodes[p][i] + a, 3 * k + a) = patches_.weights[p][i];
-    }
-    compliance.solve(Phi, U);
-    // J: the change of each touched patch's pull per unit load (the springs are linear in x).
-    Eigen::MatrixXd J(3 * pull.size(), n);
-    for (int c = 0; c < n; ++c) {
-      const std::vector<Eigen::Vector3d> moved = patch_spring_forces(patches_, F, springs, x + U.col(c));
-      for (size_t p = 0; p < pull.size(); ++p) J.block<3, 1>(3 * p, c) = std::sqrt(w[p]) * (moved[p] - pull[p]);
-    }
-    Eigen::VectorXd r(3 * pull.size()), g(n);
-    for (size_t p = 0; p < pull.size(); ++p) r.segment<3>(3 * p) = std::sqrt(w[p]) * pull[p];
-    for (size_t k = 0; k < hidden.size(); ++k) g.segment<3>(3 * k) = hidden_loads_[hidden[k]];
+    const auto J = fit.J.leftCols(n);
+    Eigen::VectorXd g(n);
+    for (int k = 0; k < fit.hidden; ++k) g.segment<3>(3 * k) = hidden_loads_[fit.patches[k]];
     Eigen::MatrixXd N = J.transpose() * J;
     const double lambda = options_.hidden_load_damping * N.trace() / n;
     if (lambda > 0) {
       N.diagonal().array() += lambda;
       const Eigen::VectorXd step = N.ldlt().solve(-J.transpose() * r - lambda * g);
       if (step.allFinite())
-        for (size_t k = 0; k < hidden.size(); ++k) hidden_loads_[hidden[k]] += step.segment<3>(3 * k);
+        for (int k = 0; k < fit.hidden; ++k) hidden_loads_[fit.patches[k]] += step.segment<3>(3 * k);
     }
   }
-  Eigen::VectorXd loads = Eigen::VectorXd::Zero(x.size());
-  double total = 0;
-  for (size_t p = 0; p < patches_.centres.size(); ++p) {
-    total += hidden_loads_[p].norm();
+  Eigen::VectorXd loads = Eigen::VectorXd::Zero(model_.positions().size());
+  for (size_t p = 0; p < patches_.centres.size(); ++p)
     for (size_t i = 0; i < patches_.nodes[p].size(); ++i)
       loads.segment<3>(3 * patches_.nodes[p][i]) += patches_.weights[p][i] * hidden_loads_[p];
-  }
   model_.set_surface_loads(std::move(loads));
+  return hidden_load_total();
+}
+
+double SurfaceRegistration::hidden_load_total() const {
+  double total = 0;
+  for (const Eigen::Vector3d& g : hidden_loads_) total += g.norm();
   return total;
 }
 

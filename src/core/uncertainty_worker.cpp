@@ -21,7 +21,8 @@ void UncertaintyWorker::set_capsule(const CapsuleOptions& capsule) {
   capsule_ = capsule;
 }
 
-bool UncertaintyWorker::start(const LiverModel& model, std::vector<SurfaceTarget> cloud_springs, uint64_t tag) {
+bool UncertaintyWorker::start(const LiverModel& model, std::vector<SurfaceTarget> cloud_springs, uint64_t tag,
+                              const SurfaceRegistration* registration) {
   // The thread is idle while the job is prepared: the model is the caller's to change.
   return job_.start([&] {
     {
@@ -39,6 +40,8 @@ bool UncertaintyWorker::start(const LiverModel& model, std::vector<SurfaceTarget
     result_ = Result();
     result_.tag = tag;
     result_.cloud_springs = std::move(cloud_springs);
+    registration_ = registration;
+    if (registration) hidden_loads_ = registration->hidden_loads();
   });
 }
 
@@ -57,6 +60,8 @@ void UncertaintyWorker::analyse() {
     if (!finite(covariances)) {
       covariances.clear();
       error = "a covariance is not finite";
+    } else if (registration_) {
+      result_.hidden_loads = registration_->hidden_load_fit(compliance_, result_.cloud_springs, hidden_loads_);
     }
   } catch (const std::exception& e) {  // not positive definite, out of memory, ...
     error = e.what();

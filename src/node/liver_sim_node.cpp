@@ -562,7 +562,7 @@ class LiverSimNode {
     const ros::WallTime now = ros::WallTime::now();
     if (!analysis_due_ || now < next_analysis_) return;
     try {
-      if (!analysis_->start(*model_, registration_->cloud_springs(), analysis_generation_)) return;
+      if (!analysis_->start(*model_, registration_->cloud_springs(), analysis_generation_, registration_.get())) return;
     } catch (const std::exception& e) {  // out of memory copying the state, a capsule refused
       ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", e.what());
       return;
@@ -590,7 +590,7 @@ class LiverSimNode {
       const int held = registration_->estimate_supports(analysis_->compliance(), result->cloud_springs);
       if (held >= 0) ROS_INFO("liver_sim: the clouds call for candidate support %d: held from the next cloud", held);
       registration_->estimate_tissue_stiffness(analysis_->compliance(), result->cloud_springs);  // both registration.*_tissue_stiffness_factor 1: off
-      registration_->estimate_hidden_loads(analysis_->compliance(), result->cloud_springs);  // registration.estimate_hidden_loads false: off
+      registration_->apply_hidden_loads(result->hidden_loads);  // fitted on the worker's thread; empty when off
     } catch (const std::runtime_error& e) {
       ROS_WARN_THROTTLE(5.0, "liver_sim: no support, stiffness or hidden loads estimate: %s", e.what());
     }
@@ -844,9 +844,7 @@ class LiverSimNode {
     stat.add("registration RMS of all points (m)", registered_.rms_all);
     stat.add("target 95% radius, largest (m)", largest_radius_95());
     stat.add("tissue stiffness factor", model_->stiffness_scale());
-    double hidden = 0;
-    for (const Eigen::Vector3d& g : registration_->hidden_loads()) hidden += g.norm();
-    stat.add("hidden loads, sum of magnitudes (N)", hidden);
+    stat.add("hidden loads, sum of magnitudes (N)", registration_->hidden_load_total());
     stat.add("last cloud size", last_cloud_points_);
     stat.add("last cloud filter time (s)", last_cloud_filter_s_);
     stat.add("last rejection", last_rejection_);

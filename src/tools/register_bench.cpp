@@ -375,7 +375,7 @@ int main(int argc, char** argv) {
                 const std::vector<Eigen::Vector3d> registered = target_positions(model);
                 energy += spring_energy(model) / opt.repeats;
                 tissue_factor += model.stiffness_scale() / opt.repeats;
-                for (const Eigen::Vector3d& g : registration.hidden_loads()) hidden_load += g.norm() / opt.repeats;
+                hidden_load += registration.hidden_load_total() / opt.repeats;
                 held.clear();
                 for (size_t c = 0; c < registration.supports_held().size(); ++c) {
                   std::ostringstream gain;
