@@ -101,20 +101,20 @@ def marker_array_fields(raw):
 
 def receive_status(stop, pipe):
     """A process of its own that only receives ~status and notes when each message arrived
-    (monotonic clock, shared with the parent) and its stamp: the status gaps a subscriber sees.
+    (monotonic clock, shared with the parent, and wall clock) and its stamp: the status gaps a
+    subscriber sees.
     The soak's own process builds 100,000-point clouds and reads meshes, which pauses its
     receivers for up to 0.1-0.2 s (measured next to this receiver: no gap at those moments)."""
     # It shares its core with the soak's own process: ahead of it (where allowed), so that the
     # gaps measured are the node's and not this process's waits for the core.
-    try:
-        os.nice(-10)
-    except PermissionError:
-        pass
+    on_the_watched_core()
     rospy.init_node("liver_sim_soak_status", anonymous=True, argv=[], disable_signals=True)
     arrivals = []
-    # TCP_NODELAY: without it, Nagle's algorithm may hold a small message for the peer's delayed ACK.
+    # TCP_NODELAY: without it, Nagle's algorithm may hold a small message for the peer's delayed
+    # ACK. Arrival on both clocks: the monotonic one for gaps, the wall clock (the stamps') for
+    # how late a status came.
     rospy.Subscriber("liver_sim/status", SimulationStatus,
-                     lambda m: arrivals.append((time.monotonic(), m.header.stamp.to_sec())),
+                     lambda m: arrivals.append((time.monotonic(), time.time(), m.header.stamp.to_sec())),
                      queue_size=100, tcp_nodelay=True)
     while not stop.wait(1.0):
         if not multiprocessing.parent_process().is_alive():
@@ -122,14 +122,21 @@ def receive_status(stop, pipe):
     pipe.send(list(arrivals))
 
 
-def watch_core(stop, pipe):
-    """A process of its own beside the status receiver (same core, same priority) that only
-    sleeps 1 ms at a time and notes when it woke more than 10 ms late: the times at which that
-    core ran none of the receiver's kind (a stall of the core, not of the node)."""
+def on_the_watched_core():
+    """The status receiver and the core watch: one core (the first this process may use), ahead
+    of the soak's own process (where allowed)."""
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     try:
         os.nice(-10)
     except PermissionError:
         pass
+
+
+def watch_core(stop, pipe):
+    """A process of its own beside the status receiver (same core, same priority) that only
+    sleeps 1 ms at a time and notes when it woke more than 10 ms late: the times at which that
+    core ran none of the receiver's kind (a stall of the core, not of the node)."""
+    on_the_watched_core()
     stalls, last, ticks = [], time.monotonic(), 0
     while not stop.is_set():
         time.sleep(0.001)
@@ -341,21 +348,21 @@ class Soak:
                receiver_exit, stalls):
         # Between arrivals at the receiver of its own (receive_status), and between the node's
         # stamps (when it published).
-        arrived = [(t, stamp) for t, stamp in arrivals if t_start <= t <= t_end]
-        received = [t for t, _ in arrived]
+        arrived = [a for a in arrivals if t_start <= a[0] <= t_end]
+        received = [t for t, _, _ in arrived]
         gaps = [b - a for a, b in zip(received, received[1:])]
         # Each receiver gap over two frames, told apart: how far apart the node stamped the two
-        # statuses, how much later than usual the second arrived (arrival - stamp over its
-        # median: the two clocks differ by a constant), and how long the receiver's core was
-        # stalled within the gap (watch_core).
-        usual = float(np.median([t - stamp for t, stamp in arrived])) if arrived else 0.0
+        # statuses, how much later than usual the second arrived (wall-clock arrival - stamp,
+        # over its median), and how long the receiver's core was stalled within the gap
+        # (watch_core).
+        usual = float(np.median([wall - stamp for _, wall, stamp in arrived])) if arrived else 0.0
         long_gaps = []
-        for (a, sa), (b, sb) in zip(arrived, arrived[1:]):
+        for (a, _, sa), (b, wb, sb) in zip(arrived, arrived[1:]):
             if b - a > 2.0 / self.node_rate:
                 stalled = sum(max(0.0, min(b, e) - max(a, s)) for s, e in stalls)
                 long_gaps.append({"at_s": round(a - t_start, 1), "gap_s": round(b - a, 3),
                                   "stamps_apart_s": round(sb - sa, 3),
-                                  "delivered_late_by_s": round(b - sb - usual, 3),
+                                  "delivered_late_by_s": round(wb - sb - usual, 3),
                                   "receiver_core_stalled_s": round(stalled, 3)})
         with self.lock:
             window = [(t, m) for t, m in self.status if t_start <= t <= t_end]
