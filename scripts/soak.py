@@ -26,8 +26,9 @@ node went on stepping after each, and heartbeats ("busy") came while steps were 
 Wall-clock checks: no ~status gap longer than two frames of the node's rate, between arrivals
 at a process of its own that only receives ~status (this one builds clouds, which pauses its
 receivers) and between the node's stamps (each receiver gap is listed with how far apart the
-node stamped its two statuses, how much later than usual the second arrived, and how long a
-watcher on the receiver's core, which only sleeps 1 ms at a time, was kept from running); the achieved frame rate at least 90% of that rate;
+node stamped its two statuses, how much later than usual the second arrived, how long a
+watcher on the receiver's core, which only sleeps 1 ms at a time, was kept from running, and how
+long the receiver collected garbage meanwhile); the achieved frame rate at least 90% of that rate;
 the late latency at most twice the early one + 0.2 s. As a rostest (--rostest) only the checks
 that hold at any speed are asserted, and a gap bound it can judge on a shared machine: none
 above --max-gap seconds (the node's step time budget makes a
@@ -40,6 +41,7 @@ usage: scripts/soak.py [--duration S] [--points N] [--json FILE]      (a master 
        test/soak.test                                                 (rostest: 30 s, --rostest)
 """
 import argparse
+import gc
 import json
 import math
 import multiprocessing
@@ -109,7 +111,20 @@ def receive_status(stop, pipe):
     # gaps measured are the node's and not this process's waits for the core.
     on_the_watched_core()
     rospy.init_node("liver_sim_soak_status", anonymous=True, argv=[], disable_signals=True)
-    arrivals = []
+    arrivals, collections = [], []
+    # Python's garbage collections pause this process: the objects of the imports and rospy's
+    # set-up are frozen out of them (they would make every full collection long), and each
+    # collection is timed, so that a gap during one is told apart.
+    gc.freeze()
+    started = []
+
+    def timed(phase, _info):
+        if phase == "start":
+            started[:] = [time.monotonic()]
+        elif started:
+            collections.append((started[0], time.monotonic()))
+
+    gc.callbacks.append(timed)
     # TCP_NODELAY: without it, Nagle's algorithm may hold a small message for the peer's delayed
     # ACK. Arrival on both clocks: the monotonic one for gaps, the wall clock (the stamps') for
     # how late a status came.
@@ -119,7 +134,7 @@ def receive_status(stop, pipe):
     while not stop.wait(1.0):
         if not multiprocessing.parent_process().is_alive():
             return
-    pipe.send(list(arrivals))
+    pipe.send((list(arrivals), [c for c in collections if c[1] - c[0] > 0.005]))
 
 
 def on_the_watched_core():
@@ -330,9 +345,9 @@ class Soak:
         stop.set()
         receiver_stop.set()
         try:
-            arrivals = arrivals_in.recv() if arrivals_in.poll(30) else []
+            arrivals, collections = arrivals_in.recv() if arrivals_in.poll(30) else ([], [])
         except EOFError:
-            arrivals = []
+            arrivals, collections = [], []
         try:
             stalls = stalls_in.recv() if stalls_in.poll(30) else []
         except EOFError:
@@ -342,10 +357,10 @@ class Soak:
         for t in threads:
             t.join(5)
         return self.report(pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end, arrivals,
-                           receiver.exitcode, stalls)
+                           receiver.exitcode, stalls, collections)
 
     def report(self, pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end, arrivals,
-               receiver_exit, stalls):
+               receiver_exit, stalls, collections):
         # Between arrivals at the receiver of its own (receive_status), and between the node's
         # stamps (when it published).
         arrived = [a for a in arrivals if t_start <= a[0] <= t_end]
@@ -360,10 +375,12 @@ class Soak:
         for (a, _, sa), (b, wb, sb) in zip(arrived, arrived[1:]):
             if b - a > 2.0 / self.node_rate:
                 stalled = sum(max(0.0, min(b, e) - max(a, s)) for s, e in stalls)
+                collecting = sum(max(0.0, min(b, e) - max(a, s)) for s, e in collections)
                 long_gaps.append({"at_s": round(a - t_start, 1), "gap_s": round(b - a, 3),
                                   "stamps_apart_s": round(sb - sa, 3),
                                   "delivered_late_by_s": round(wb - sb - usual, 3),
-                                  "receiver_core_stalled_s": round(stalled, 3)})
+                                  "receiver_core_stalled_s": round(stalled, 3),
+                                  "receiver_collecting_garbage_s": round(collecting, 3)})
         with self.lock:
             window = [(t, m) for t, m in self.status if t_start <= t <= t_end]
             stamp_gaps = [b[1].header.stamp.to_sec() - a[1].header.stamp.to_sec() for a, b in zip(window, window[1:])]
@@ -403,6 +420,8 @@ class Soak:
             "status_max_gap_s": round(max(gaps), 3) if gaps else None,
             "status_gaps_over_two_frames": sum(1 for g in gaps if g > 2.0 / self.node_rate),
             "status_gaps_over_two_frames_apart": long_gaps,
+            "receiver_garbage_collections_over_5ms": {"count": len(collections),
+                                                      "max_s": round(max((e - s for s, e in collections), default=0.0), 3)},
             "receiver_core_stalls_over_10ms": {"count": sum(1 for s, e in stalls if t_start <= s <= t_end),
                                                "max_s": round(max((e - s for s, e in stalls if t_start <= s <= t_end),
                                                                   default=0.0), 3)},
