@@ -12,9 +12,9 @@ and every fifth injection holds a step up for 0.3 s, which the node's heartbeat 
 
 Reports: messages sent and handled, RSS of the node at start (after a warm-up) and end, status
 messages and the largest gap between them (heartbeats included: state "busy", sent while a frame
-has run half a frame and no status went out for one frame), the longest frame (the largest gap between the stamps of the loop's
-own statuses), the node's simulation frames against the frames its rate asks for (dropped
-frames), pose-to-mesh latency early and late (a growing queue would make it grow), refused
+has run half a frame and no status went out for one frame), the longest frame (the largest gap
+between the stamps of the loop's own statuses), the node's simulation frames against the frames
+its rate asks for (dropped frames), pose-to-mesh latency early and late (a growing queue would make it grow), refused
 inputs. Every floating-point field of every message the node publishes on ~status, ~wrench,
 ~mesh, ~instruments and ~vessels is checked for NaN and infinity.
 
@@ -28,8 +28,8 @@ at a process of its own that only receives ~status (this one builds clouds, whic
 receivers) and between the node's stamps (each receiver gap is listed with how far apart the
 node stamped its two statuses, how much later than usual the second arrived, how long a
 watcher on the receiver's core, which only sleeps 1 ms at a time, was kept from running, and how
-long the receiver collected garbage meanwhile); the achieved frame rate at least 90% of that rate;
-the late latency at most twice the early one + 0.2 s. As a rostest (--rostest) only the checks
+long the receiver collected garbage meanwhile); the achieved frame rate at least 90% of that
+rate; the late latency at most twice the early one + 0.2 s. As a rostest (--rostest) only the checks
 that hold at any speed are asserted, and a gap bound it can judge on a shared machine: none
 above --max-gap seconds (the node's step time budget makes a
 frame at most one Newton iteration and one stage long, about 0.7 s on the phantom with contact;
@@ -163,6 +163,20 @@ def watch_core(stop, pipe):
         if ticks % 1000 == 0 and not multiprocessing.parent_process().is_alive():
             return
     pipe.send(stalls)
+
+
+def receive(pipe, nothing):
+    """What a child process sends at its end, or `nothing` when it sends nothing within 30 s or
+    died unsent."""
+    try:
+        return pipe.recv() if pipe.poll(30) else nothing
+    except EOFError:
+        return nothing
+
+
+def overlap(a, b, intervals):
+    """How long the (start, end) intervals cover of [a, b] (s)."""
+    return sum(max(0.0, min(b, e) - max(a, s)) for s, e in intervals)
 
 
 def node_pid():
@@ -344,14 +358,8 @@ class Soak:
         t_end = time.monotonic()
         stop.set()
         receiver_stop.set()
-        try:
-            arrivals, collections = arrivals_in.recv() if arrivals_in.poll(30) else ([], [])
-        except EOFError:
-            arrivals, collections = [], []
-        try:
-            stalls = stalls_in.recv() if stalls_in.poll(30) else []
-        except EOFError:
-            stalls = []
+        arrivals, collections = receive(arrivals_in, ([], []))
+        stalls = receive(stalls_in, [])
         receiver.join(5)
         watch.join(5)
         for t in threads:
@@ -368,19 +376,16 @@ class Soak:
         gaps = [b - a for a, b in zip(received, received[1:])]
         # Each receiver gap over two frames, told apart: how far apart the node stamped the two
         # statuses, how much later than usual the second arrived (wall-clock arrival - stamp,
-        # over its median), and how long the receiver's core was stalled within the gap
-        # (watch_core).
+        # over its median), how long the receiver's core was stalled (watch_core) and how long
+        # the receiver collected garbage within the gap.
         usual = float(np.median([wall - stamp for _, wall, stamp in arrived])) if arrived else 0.0
-        long_gaps = []
-        for (a, _, sa), (b, wb, sb) in zip(arrived, arrived[1:]):
-            if b - a > 2.0 / self.node_rate:
-                stalled = sum(max(0.0, min(b, e) - max(a, s)) for s, e in stalls)
-                collecting = sum(max(0.0, min(b, e) - max(a, s)) for s, e in collections)
-                long_gaps.append({"at_s": round(a - t_start, 1), "gap_s": round(b - a, 3),
-                                  "stamps_apart_s": round(sb - sa, 3),
-                                  "delivered_late_by_s": round(wb - sb - usual, 3),
-                                  "receiver_core_stalled_s": round(stalled, 3),
-                                  "receiver_collecting_garbage_s": round(collecting, 3)})
+        long_gaps = [{"at_s": round(a - t_start, 1), "gap_s": round(b - a, 3), "stamps_apart_s": round(sb - sa, 3),
+                      "delivered_late_by_s": round(wb - sb - usual, 3),
+                      "receiver_core_stalled_s": round(overlap(a, b, stalls), 3),
+                      "receiver_collecting_garbage_s": round(overlap(a, b, collections), 3)}
+                     for (a, _, sa), (b, wb, sb) in zip(arrived, arrived[1:]) if b - a > 2.0 / self.node_rate]
+        stalls = [(s, e) for s, e in stalls if t_start <= s <= t_end]
+        collections = [(s, e) for s, e in collections if t_start <= s <= t_end]
         with self.lock:
             window = [(t, m) for t, m in self.status if t_start <= t <= t_end]
             stamp_gaps = [b[1].header.stamp.to_sec() - a[1].header.stamp.to_sec() for a, b in zip(window, window[1:])]
@@ -422,9 +427,8 @@ class Soak:
             "status_gaps_over_two_frames_apart": long_gaps,
             "receiver_garbage_collections_over_5ms": {"count": len(collections),
                                                       "max_s": round(max((e - s for s, e in collections), default=0.0), 3)},
-            "receiver_core_stalls_over_10ms": {"count": sum(1 for s, e in stalls if t_start <= s <= t_end),
-                                               "max_s": round(max((e - s for s, e in stalls if t_start <= s <= t_end),
-                                                                  default=0.0), 3)},
+            "receiver_core_stalls_over_10ms": {"count": len(stalls),
+                                               "max_s": round(max((e - s for s, e in stalls), default=0.0), 3)},
             "status_max_stamp_gap_s": round(max(stamp_gaps), 3) if stamp_gaps else None,
             "status_stamp_gaps_over_two_frames": sum(1 for g in stamp_gaps if g > 2.0 / self.node_rate),
             "status_busy": busy,

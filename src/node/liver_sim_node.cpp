@@ -572,9 +572,9 @@ class LiverSimNode {
     analysis_started_at_ = ros::Time::now();
   }
 
-  // A finished analysis, if one is: its covariances shown, and the registration's estimates
-  // (candidate supports, the tissue's stiffness, the hidden loads) solved on its factor with the springs it was
-  // made with. (simulation thread)
+  // A finished analysis, if one is: its covariances shown, the registration's estimates
+  // (candidate supports, the tissue's stiffness) solved on its factor with the springs it was
+  // made with, and the step of the hidden loads' fit the analysis made. (simulation thread)
   void adopt_analysis() {
     std::optional<UncertaintyWorker::Result> result = analysis_->take();
     if (!result || result->tag != analysis_generation_) return;
