@@ -10,7 +10,8 @@
 //     spread as a Gaussian bump of width patch_spacing / 2), independent, of standard deviation
 //     `force_ratio` times the typical force the cloud's springs exert on a patch, in every
 //     direction: the cloud shows how hard the surgery pulls on what is seen; as much may act
-//     on any patch;
+//     on any patch. The pull is taken without the model's surface loads (the hidden loads the
+//     registration found, linearised), which carry part of it;
 //   - the tissue's stiffness, a factor exp(s), s ~ N(0, stiffness_log_sd^2): the state moves by
 //     -A^-1 f_int s (f_int: the tissue's internal forces at the state);
 //   - the sensor: each spring's point moves along its normal by the springs' RMS length.
@@ -48,7 +49,7 @@ class TargetUncertainty {
   TargetUncertainty(LiverModel& model, const UncertaintyOptions& options);
 
   // Covariances (m^2) of tracked_targets(model), in its order, at the state `compliance` was
-  // factorised at: the total and its three parts. `cloud_springs`: the springs of the cloud
+  // factorised at, with the model's surface loads: the total and its three parts. `cloud_springs`: the springs of the cloud
   // (SurfaceRegistration::cloud_springs), whose forces scale the unknown ones and whose
   // lengths are the noise.
   struct Covariance {

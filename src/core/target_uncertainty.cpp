@@ -75,9 +75,18 @@ std::vector<TargetUncertainty::Covariance> TargetUncertainty::covariances(StateC
   const Eigen::VectorXd& f_int = compliance.internal_forces();
 
   // The springs: the net force of each patch they pull on (its typical size scales the unknown
-  // forces), and their RMS length (the sensor's noise after the voxel grid's averaging).
+  // forces), and their RMS length (the sensor's noise after the voxel grid's averaging). The
+  // pull is taken where the model would be without the hidden loads the registration found
+  // (x - A^-1 f, linearised; the springs are linear in x): the loads carry part of what the
+  // cloud shows of the surgery's forces, not less of it.
   const Eigen::MatrixX3i& F = m.boundary();
-  const std::vector<Eigen::Vector3d> pull = patch_spring_forces(patches_, F, springs, x);
+  Eigen::VectorXd unloaded = x;
+  if (model_.surface_loads().size() == x.size()) {
+    Eigen::MatrixXd moved;
+    compliance.solve(model_.surface_loads(), moved);
+    unloaded -= moved.col(0);
+  }
+  const std::vector<Eigen::Vector3d> pull = patch_spring_forces(patches_, F, springs, unloaded);
   std::vector<char> pulled(pull.size(), 0);
   double length_squared = 0;
   for (const SurfaceTarget& s : springs) {

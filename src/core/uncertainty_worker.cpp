@@ -36,6 +36,7 @@ bool UncertaintyWorker::start(const LiverModel& model, std::vector<SurfaceTarget
     }
     model_->set_stiffness_scale(model.stiffness_scale());
     model_->set_surface_targets(model.surface_targets());
+    model_->set_surface_loads(model.surface_loads());
     model_->set_positions(model.positions());
     result_ = Result();
     result_.tag = tag;
