@@ -773,6 +773,49 @@ TEST(HiddenLoads, TheUnknownForcesKeepTheSizeTheCloudsShowed) {
       << loads.typical_force << " N against " << loads.unloaded_typical_force << " N";
 }
 
+TEST(HiddenLoads, AStepThatDivergesOnNewLoadsGoesBackToTheLoadsBefore) {
+  // The lifted beam's loads after four rounds, solved by a cloud; then a new fit, and the next
+  // cloud's first step diverges (an injected NaN): its retry runs on the loads before the fit,
+  // exactly, on the model too. Without a divergence the new loads stay. Mutations seen failing:
+  // the loads kept on a divergence; the solved loads never recorded (the retry on no loads).
+  Beam beam(false);
+  beam.truth_scene.loads.push_back(beam_lift());
+  beam.model_scene.registration.candidate_supports.clear();
+  beam.model_scene.registration.estimate_hidden_loads = true;
+  beam.model_scene.registration.hidden_load_damping = 0.1;
+  LiverModel model(beam.mesh, beam.model_scene);
+  ASSERT_TRUE(model.step().converged());
+  SurfaceRegistration registration(model, beam.model_scene.registration);
+  StateCompliance compliance(model);
+  const pcl::PointCloud<pcl::PointXYZ> top = beam.top_cloud();
+  const Eigen::Vector3d eye(0.03, 0.01, 0.3);
+  for (int round = 0; round < 4; ++round) {
+    registration.register_cloud(top, eye);
+    compliance.factorize();
+    registration.estimate_hidden_loads(compliance, registration.cloud_springs());
+  }
+  ASSERT_FALSE(registration.register_cloud(top, eye).hidden_loads_reverted);
+  const std::vector<Eigen::Vector3d> solved = registration.hidden_loads();
+  const Eigen::VectorXd solved_nodal = model.surface_loads();
+  ASSERT_GT(registration.hidden_load_total(), 0.0);
+
+  compliance.factorize();
+  registration.estimate_hidden_loads(compliance, registration.cloud_springs());
+  ASSERT_NE(registration.hidden_loads(), solved);
+  model.stepper().inject_fault(NewtonStepper::InjectedFault::NonFinite);
+  const RegistrationFrame diverged = registration.register_cloud(top, eye);
+  EXPECT_TRUE(diverged.hidden_loads_reverted);
+  EXPECT_NE(diverged.step.status, StepResult::Status::Diverged) << diverged.step.message;
+  EXPECT_EQ(registration.hidden_loads(), solved);
+  EXPECT_EQ(model.surface_loads(), solved_nodal);
+
+  compliance.factorize();
+  registration.estimate_hidden_loads(compliance, registration.cloud_springs());
+  const std::vector<Eigen::Vector3d> fitted = registration.hidden_loads();
+  EXPECT_FALSE(registration.register_cloud(top, eye).hidden_loads_reverted);
+  EXPECT_EQ(registration.hidden_loads(), fitted);
+}
+
 TEST(HiddenLoads, SurfaceLoadsActAsTheSceneForcesTheyEqual) {
   // The truth's lift given to the model as surface loads on the same nodes (a scene force is
   // spread equally over its region's nodes): the same equilibrium, by another path (the

@@ -81,6 +81,7 @@ struct RegistrationFrame {
   int updates = 0;           // correspondence updates solved in this frame
   int newton_iterations = 0; // over all updates of this frame
   int factorizations = 0;    // CHOLMOD factorisations, over all updates
+  bool hidden_loads_reverted = false;  // a step diverged on new hidden loads: the ones before them act again
   double filter_ms = 0, correspondence_ms = 0, solve_ms = 0, total_ms = 0;
 };
 
@@ -152,7 +153,9 @@ class SurfaceRegistration {
   // the mean diagonal of J^T W J (the loads stay the smallest that explain the pull). A patch
   // the springs touch carries no load: one that had a load drops it, its effect on the pull
   // counted in the step. Applied to the model (LiverModel::set_surface_loads) from its next
-  // step; successive calls converge. Returns hidden_load_total(). Costs one solve with three
+  // step; successive calls converge. A registration step that diverges (rolled back) with loads
+  // no registration step has yet solved returns to the loads before them for its retry
+  // (RegistrationFrame::hidden_loads_reverted). Returns hidden_load_total(). Costs one solve with three
   // columns per untouched patch. It is apply_hidden_loads(hidden_load_fit(compliance, springs,
   // hidden_loads())).
   double estimate_hidden_loads(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs);
@@ -258,6 +261,8 @@ class SurfaceRegistration {
   std::vector<bool> held_;
   std::vector<double> gains_;
   std::vector<Eigen::Vector3d> hidden_loads_;  // per patch (N)
+  std::vector<Eigen::Vector3d> solved_loads_;  // per patch (N): those of the last registration step that did not diverge
+  void set_model_loads();                      // hidden_loads_ as nodal loads on the model
 };
 
 }  // namespace liver_sim

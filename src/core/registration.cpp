@@ -100,6 +100,7 @@ SurfaceRegistration::SurfaceRegistration(LiverModel& model, const RegistrationOp
   if (!supports_.empty() || options.estimates_tissue_stiffness() || options.estimate_hidden_loads)
     patches_ = make_surface_patches(model.mechanics(), options.uncertainty.patch_spacing);
   hidden_loads_.assign(patches_.centres.size(), Eigen::Vector3d::Zero());
+  solved_loads_ = hidden_loads_;
 }
 
 void SurfaceRegistration::apply_springs() {
@@ -244,12 +245,16 @@ double SurfaceRegistration::apply_hidden_loads(const HiddenLoadFit& fit) {
         for (int k = 0; k < fit.hidden; ++k) hidden_loads_[fit.patches[k]] += step.segment<3>(3 * k);
     }
   }
+  set_model_loads();
+  return hidden_load_total();
+}
+
+void SurfaceRegistration::set_model_loads() {
   Eigen::VectorXd loads = Eigen::VectorXd::Zero(model_.positions().size());
   for (size_t p = 0; p < patches_.centres.size(); ++p)
     for (size_t i = 0; i < patches_.nodes[p].size(); ++i)
       loads.segment<3>(3 * patches_.nodes[p][i]) += patches_.weights[p][i] * hidden_loads_[p];
   model_.set_surface_loads(std::move(loads));
-  return hidden_load_total();
 }
 
 double SurfaceRegistration::hidden_load_total() const {
@@ -262,6 +267,7 @@ void SurfaceRegistration::clear() {
   model_.set_stiffness_scale(1.0);
   model_.set_surface_loads(Eigen::VectorXd());
   hidden_loads_.assign(patches_.centres.size(), Eigen::Vector3d::Zero());
+  solved_loads_ = hidden_loads_;
   model_.set_surface_targets({});
   cloud_springs_.clear();
   held_.assign(supports_.size(), false);
@@ -669,10 +675,16 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
   } scene_options{model_, scene_solver};
   frame.step = model_.step();
   // An iteration on a factor from before the springs moved may not descend, and the step is
-  // rolled back (stalled). Once more, on a fresh factor.
+  // rolled back (stalled). Once more, on a fresh factor, and with the hidden loads that a step
+  // solved last: a step of the loads' fit is linearised and may go too far.
   if (frame.step.status == StepResult::Status::Diverged) {
     frame.newton_iterations += frame.step.iterations;
     frame.factorizations += frame.step.factorizations;
+    if (hidden_loads_ != solved_loads_) {
+      hidden_loads_ = solved_loads_;
+      set_model_loads();
+      frame.hidden_loads_reverted = true;
+    }
     model_.refactorize();
     frame_solver.time_budget = budget_left();
     model_.set_solver_options(frame_solver);
@@ -681,6 +693,7 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
   frame.solve_ms += ms_since(t0);
   frame.newton_iterations += frame.step.iterations;
   frame.factorizations += frame.step.factorizations;
+  if (frame.step.status != StepResult::Status::Diverged) solved_loads_ = hidden_loads_;
 }
 
 void SurfaceRegistration::accept_update(int found, RegistrationFrame& frame) {

@@ -304,11 +304,11 @@ class LiverSimNode {
       stepped = registered || must_step;
       // While clouds come, the model converges on the last one in the registration's short
       // steps, so that the next cloud waits for one iteration, not a full solve.
-      if (registered) return registered->step;
+      if (registered) return warn_on_reverted_loads(*registered).step;
       if (!stepped) return StepResult();
       if (registering_) {
         registered_ = registration_->refine();  // a later update of the cloud may have moved the fit
-        return registered_.step;
+        return warn_on_reverted_loads(registered_).step;
       }
       return model_->step();
     });
@@ -525,6 +525,12 @@ class LiverSimNode {
     std::lock_guard<std::mutex> lock(mutex_);
     pending_cloud_ = std::move(pending);  // replaced, never queued: the latest cloud wins
     ++clouds_;
+  }
+
+  const RegistrationFrame& warn_on_reverted_loads(const RegistrationFrame& f) {
+    if (f.hidden_loads_reverted)
+      ROS_WARN_THROTTLE(5.0, "liver_sim: a registration step diverged on new hidden loads; the loads before them act again");
+    return f;
   }
 
   // Registers the latest cloud, if one came since the last call. (simulation thread)
