@@ -358,8 +358,8 @@ TEST(UncertaintyWorker, AnalysesTheStateItIsHandedOnAModelOfItsOwn) {
   // The registered phantom with a stiffer tissue and the capsule on, analysed by the worker on
   // its own model, against the analysis on the caller's model: the same to round-off (the
   // elements' polar iterations start from each model's last rotations). Mutations seen
-  // failing: the stiffness factor, the springs, the positions or the capsule not handed over
-  // (each alone).
+  // failing: the stiffness factor, the springs, the positions, the surface loads or the capsule
+  // not handed over (each alone).
   RestPhantom p;
   const std::vector<int> top = p.above(0.05);
   std::vector<Eigen::Vector3d> points;
@@ -373,6 +373,9 @@ TEST(UncertaintyWorker, AnalysesTheStateItIsHandedOnAModelOfItsOwn) {
   ASSERT_EQ(p.model.set_capsule(capsule), "");
   worker.set_capsule(capsule);
   p.model.set_stiffness_scale(1.5);
+  Eigen::VectorXd loads = Eigen::VectorXd::Zero(p.model.positions().size());
+  loads(3 * p.model.boundary()(top.back(), 0) + 2) = -0.5;  // N, as a hidden load
+  p.model.set_surface_loads(loads);
   ASSERT_TRUE(worker.start(p.model, registration.cloud_springs(), 7));
   EXPECT_FALSE(worker.start(p.model, registration.cloud_springs(), 8));  // one at a time
   const UncertaintyWorker::Result r = wait_for(worker);
@@ -768,16 +771,20 @@ TEST(HiddenLoads, TheUnknownForcesKeepTheSizeTheCloudsShowed) {
   // (3.5% apart, the bend being 2 cm). Mutation seen failing: the pull taken at the loaded
   // state (0.0005 N against 0.035 N).
   const HiddenLoadFit loads = fit_lifted_beam(true);
+  ASSERT_GT(loads.net_load.z(), 0.2);  // the loads took the pull
   ASSERT_GT(loads.unloaded_typical_force, 0.0);
   EXPECT_NEAR(loads.typical_force, loads.unloaded_typical_force, 0.1 * loads.unloaded_typical_force)
       << loads.typical_force << " N against " << loads.unloaded_typical_force << " N";
 }
 
 TEST(HiddenLoads, AStepThatDivergesOnNewLoadsGoesBackToTheLoadsBefore) {
-  // The lifted beam's loads after four rounds, solved by a cloud; then a new fit, and the next
-  // cloud's first step diverges (an injected NaN): its retry runs on the loads before the fit,
-  // exactly, on the model too. Without a divergence the new loads stay. Mutations seen failing:
-  // the loads kept on a divergence; the solved loads never recorded (the retry on no loads).
+  // The lifted beam's loads after four rounds, stepped on by a cloud; then a new fit, and the
+  // next cloud's first step diverges (an injected NaN): its retry runs on the loads before the
+  // fit, exactly, on the model too, and a fit made with the reverted loads is ignored. A step
+  // of the model outside the registration that did not diverge keeps the new loads, and so does
+  // a step without a divergence; after clear() there is nothing to return to. Mutations seen
+  // failing: the loads kept on a divergence; the stepped loads never recorded (the retry on no
+  // loads); a fit applied whatever loads it was made with; clear() keeping the stepped loads.
   Beam beam(false);
   beam.truth_scene.loads.push_back(beam_lift());
   beam.model_scene.registration.candidate_supports.clear();
@@ -802,18 +809,38 @@ TEST(HiddenLoads, AStepThatDivergesOnNewLoadsGoesBackToTheLoadsBefore) {
   compliance.factorize();
   registration.estimate_hidden_loads(compliance, registration.cloud_springs());
   ASSERT_NE(registration.hidden_loads(), solved);
+  compliance.factorize();
+  const SurfaceRegistration::HiddenLoadFit stale =
+      registration.hidden_load_fit(compliance, registration.cloud_springs(), registration.hidden_loads());
   model.stepper().inject_fault(NewtonStepper::InjectedFault::NonFinite);
   const RegistrationFrame diverged = registration.register_cloud(top, eye);
   EXPECT_TRUE(diverged.hidden_loads_reverted);
   EXPECT_NE(diverged.step.status, StepResult::Status::Diverged) << diverged.step.message;
   EXPECT_EQ(registration.hidden_loads(), solved);
   EXPECT_EQ(model.surface_loads(), solved_nodal);
+  registration.apply_hidden_loads(stale);
+  EXPECT_EQ(registration.hidden_loads(), solved);
 
   compliance.factorize();
   registration.estimate_hidden_loads(compliance, registration.cloud_springs());
   const std::vector<Eigen::Vector3d> fitted = registration.hidden_loads();
+  const StepResult outside = model.step();
+  ASSERT_NE(outside.status, StepResult::Status::Diverged);
+  registration.note_step(outside);
+  model.stepper().inject_fault(NewtonStepper::InjectedFault::NonFinite);
   EXPECT_FALSE(registration.register_cloud(top, eye).hidden_loads_reverted);
   EXPECT_EQ(registration.hidden_loads(), fitted);
+
+  compliance.factorize();
+  registration.estimate_hidden_loads(compliance, registration.cloud_springs());
+  const std::vector<Eigen::Vector3d> refitted = registration.hidden_loads();
+  EXPECT_FALSE(registration.register_cloud(top, eye).hidden_loads_reverted);
+  EXPECT_EQ(registration.hidden_loads(), refitted);
+
+  registration.clear();
+  model.stepper().inject_fault(NewtonStepper::InjectedFault::NonFinite);
+  EXPECT_FALSE(registration.register_cloud(top, eye).hidden_loads_reverted);
+  EXPECT_EQ(registration.hidden_load_total(), 0.0);
 }
 
 TEST(HiddenLoads, SurfaceLoadsActAsTheSceneForcesTheyEqual) {

@@ -81,7 +81,7 @@ struct RegistrationFrame {
   int updates = 0;           // correspondence updates solved in this frame
   int newton_iterations = 0; // over all updates of this frame
   int factorizations = 0;    // CHOLMOD factorisations, over all updates
-  bool hidden_loads_reverted = false;  // a step diverged on new hidden loads: the ones before them act again
+  bool hidden_loads_reverted = false;  // a step diverged while new hidden loads acted: the ones before them act again
   double filter_ms = 0, correspondence_ms = 0, solve_ms = 0, total_ms = 0;
 };
 
@@ -153,9 +153,9 @@ class SurfaceRegistration {
   // the mean diagonal of J^T W J (the loads stay the smallest that explain the pull). A patch
   // the springs touch carries no load: one that had a load drops it, its effect on the pull
   // counted in the step. Applied to the model (LiverModel::set_surface_loads) from its next
-  // step; successive calls converge. A registration step that diverges (rolled back) with loads
-  // no registration step has yet solved returns to the loads before them for its retry
-  // (RegistrationFrame::hidden_loads_reverted). Returns hidden_load_total(). Costs one solve with three
+  // step; successive calls converge. A registration step that diverges (rolled back) on loads
+  // no step has yet taken without diverging (note_step) returns to the loads before them for
+  // its retry (RegistrationFrame::hidden_loads_reverted). Returns hidden_load_total(). Costs one solve with three
   // columns per untouched patch. It is apply_hidden_loads(hidden_load_fit(compliance, springs,
   // hidden_loads())).
   double estimate_hidden_loads(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs);
@@ -168,11 +168,17 @@ class SurfaceRegistration {
     int hidden = 0;
     Eigen::MatrixXd J;         // the touched patches' pull per unit load, weighted (sqrt w_p)
     Eigen::VectorXd r;         // their pull, weighted
+    std::vector<Eigen::Vector3d> loads;  // the loads it was made with
   };
   HiddenLoadFit hidden_load_fit(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs,
                                 const std::vector<Eigen::Vector3d>& loads) const;
-  // The step from a fit made with the current hidden_loads(); returns hidden_load_total().
+  // The step from a fit; one made with other loads than the current hidden_loads() (they were
+  // reverted meanwhile) is ignored. Returns hidden_load_total().
   double apply_hidden_loads(const HiddenLoadFit& fit);
+  // A step of the model outside the registration (the node's frames without a cloud): one that
+  // did not diverge has taken the current hidden loads. The registration's own steps note
+  // themselves.
+  void note_step(const StepResult& step);
   // Per patch (SurfacePatches of options.uncertainty.patch_spacing), its hidden load (N); their
   // magnitudes' sum.
   const std::vector<Eigen::Vector3d>& hidden_loads() const { return hidden_loads_; }
@@ -261,7 +267,7 @@ class SurfaceRegistration {
   std::vector<bool> held_;
   std::vector<double> gains_;
   std::vector<Eigen::Vector3d> hidden_loads_;  // per patch (N)
-  std::vector<Eigen::Vector3d> solved_loads_;  // per patch (N): those of the last registration step that did not diverge
+  std::vector<Eigen::Vector3d> stepped_loads_;  // per patch (N): those of the model's last step that did not diverge
   void set_model_loads();                      // hidden_loads_ as nodal loads on the model
 };
 

@@ -100,7 +100,7 @@ SurfaceRegistration::SurfaceRegistration(LiverModel& model, const RegistrationOp
   if (!supports_.empty() || options.estimates_tissue_stiffness() || options.estimate_hidden_loads)
     patches_ = make_surface_patches(model.mechanics(), options.uncertainty.patch_spacing);
   hidden_loads_.assign(patches_.centres.size(), Eigen::Vector3d::Zero());
-  solved_loads_ = hidden_loads_;
+  stepped_loads_ = hidden_loads_;
 }
 
 void SurfaceRegistration::apply_springs() {
@@ -193,6 +193,7 @@ SurfaceRegistration::HiddenLoadFit SurfaceRegistration::hidden_load_fit(StateCom
                                                                         const std::vector<Eigen::Vector3d>& loads) const {
   HiddenLoadFit fit;
   if (!options_.estimate_hidden_loads || springs.empty()) return fit;
+  fit.loads = loads;
   const Eigen::VectorXd& x = compliance.state();
   const Eigen::MatrixX3i& F = model_.boundary();
   std::vector<char> touched(patches_.centres.size(), 0);
@@ -224,7 +225,7 @@ SurfaceRegistration::HiddenLoadFit SurfaceRegistration::hidden_load_fit(StateCom
 }
 
 double SurfaceRegistration::apply_hidden_loads(const HiddenLoadFit& fit) {
-  if (fit.patches.empty()) return hidden_load_total();
+  if (fit.patches.empty() || fit.loads != hidden_loads_) return hidden_load_total();
   // The patches now in view drop their loads, and the pull the fit sees changes by as much.
   Eigen::VectorXd r = fit.r;
   for (size_t k = fit.hidden; k < fit.patches.size(); ++k) {
@@ -249,6 +250,10 @@ double SurfaceRegistration::apply_hidden_loads(const HiddenLoadFit& fit) {
   return hidden_load_total();
 }
 
+void SurfaceRegistration::note_step(const StepResult& step) {
+  if (step.status != StepResult::Status::Diverged) stepped_loads_ = hidden_loads_;
+}
+
 void SurfaceRegistration::set_model_loads() {
   Eigen::VectorXd loads = Eigen::VectorXd::Zero(model_.positions().size());
   for (size_t p = 0; p < patches_.centres.size(); ++p)
@@ -267,7 +272,7 @@ void SurfaceRegistration::clear() {
   model_.set_stiffness_scale(1.0);
   model_.set_surface_loads(Eigen::VectorXd());
   hidden_loads_.assign(patches_.centres.size(), Eigen::Vector3d::Zero());
-  solved_loads_ = hidden_loads_;
+  stepped_loads_ = hidden_loads_;
   model_.set_surface_targets({});
   cloud_springs_.clear();
   held_.assign(supports_.size(), false);
@@ -675,13 +680,13 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
   } scene_options{model_, scene_solver};
   frame.step = model_.step();
   // An iteration on a factor from before the springs moved may not descend, and the step is
-  // rolled back (stalled). Once more, on a fresh factor, and with the hidden loads that a step
-  // solved last: a step of the loads' fit is linearised and may go too far.
+  // rolled back (stalled). Once more, on a fresh factor, and with the hidden loads of the last
+  // step that did not diverge: a step of the loads' fit is linearised and may go too far.
   if (frame.step.status == StepResult::Status::Diverged) {
     frame.newton_iterations += frame.step.iterations;
     frame.factorizations += frame.step.factorizations;
-    if (hidden_loads_ != solved_loads_) {
-      hidden_loads_ = solved_loads_;
+    if (hidden_loads_ != stepped_loads_) {
+      hidden_loads_ = stepped_loads_;
       set_model_loads();
       frame.hidden_loads_reverted = true;
     }
@@ -693,7 +698,7 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
   frame.solve_ms += ms_since(t0);
   frame.newton_iterations += frame.step.iterations;
   frame.factorizations += frame.step.factorizations;
-  if (frame.step.status != StepResult::Status::Diverged) solved_loads_ = hidden_loads_;
+  note_step(frame.step);
 }
 
 void SurfaceRegistration::accept_update(int found, RegistrationFrame& frame) {

@@ -310,7 +310,9 @@ class LiverSimNode {
         registered_ = registration_->refine();  // a later update of the cloud may have moved the fit
         return warn_on_reverted_loads(registered_).step;
       }
-      return model_->step();
+      const StepResult step = model_->step();
+      registration_->note_step(step);
+      return step;
     });
     if (guard_.last_step_faulted()) {
       // Retried at the next frame: the fault may have been passing (memory, an injected one).
@@ -529,7 +531,7 @@ class LiverSimNode {
 
   const RegistrationFrame& warn_on_reverted_loads(const RegistrationFrame& f) {
     if (f.hidden_loads_reverted)
-      ROS_WARN_THROTTLE(5.0, "liver_sim: a registration step diverged on new hidden loads; the loads before them act again");
+      ROS_WARN_THROTTLE(5.0, "liver_sim: a registration step diverged while new hidden loads acted; the loads before them act again");
     return f;
   }
 
