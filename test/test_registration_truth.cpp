@@ -707,12 +707,18 @@ LoadOptions beam_lift() {
   return lift;
 }
 
-HiddenLoadFit fit_lifted_beam(bool estimate) {
+// The beam whose truth is lifted, its hidden loads estimated when `estimate`.
+Beam lifted_beam(bool estimate) {
   Beam beam(false);
   beam.truth_scene.loads.push_back(beam_lift());
   beam.model_scene.registration.candidate_supports.clear();
   beam.model_scene.registration.estimate_hidden_loads = estimate;
   beam.model_scene.registration.hidden_load_damping = 0.1;  // weak: a noise-free cloud shows the force itself
+  return beam;
+}
+
+HiddenLoadFit fit_lifted_beam(bool estimate) {
+  Beam beam = lifted_beam(estimate);
   LiverModel truth(beam.mesh, beam.truth_scene), model(beam.mesh, beam.model_scene);
   EXPECT_TRUE(truth.step().converged());
   EXPECT_TRUE(model.step().converged());
@@ -753,7 +759,8 @@ TEST(HiddenLoads, TheCloudsFindTheForceWhereTheCameraDoesNotLook) {
   // The springs alone bend the seen part to the cloud and leave the hidden end where the model's
   // gravity puts it (19.6 mm off); the hidden loads carry the lift (0.32 N found), the probe
   // follows (0.44 mm off) and the springs' pull falls. Mutations seen failing: the Gauss-Newton
-  // step's sign flipped; the response to a load taken without the solve (Phi for A^-1 Phi).
+  // step's sign flipped; the response to a load taken without the solve (S^T for A^-1 S^T in the
+  // adjoint); the sign of the springs' pull per unit state change (S).
   const HiddenLoadFit springs = fit_lifted_beam(false), loads = fit_lifted_beam(true);
   EXPECT_EQ(springs.net_load.norm(), 0.0);
   // The lift itself (a force along the beam bends it little and stays uncertain: a moment of
@@ -785,11 +792,7 @@ TEST(HiddenLoads, AStepThatDivergesOnNewLoadsGoesBackToTheLoadsBefore) {
   // a step without a divergence; after clear() there is nothing to return to. Mutations seen
   // failing: the loads kept on a divergence; the stepped loads never recorded (the retry on no
   // loads); a fit applied whatever loads it was made with; clear() keeping the stepped loads.
-  Beam beam(false);
-  beam.truth_scene.loads.push_back(beam_lift());
-  beam.model_scene.registration.candidate_supports.clear();
-  beam.model_scene.registration.estimate_hidden_loads = true;
-  beam.model_scene.registration.hidden_load_damping = 0.1;
+  Beam beam = lifted_beam(true);
   LiverModel model(beam.mesh, beam.model_scene);
   ASSERT_TRUE(model.step().converged());
   SurfaceRegistration registration(model, beam.model_scene.registration);

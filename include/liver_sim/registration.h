@@ -155,9 +155,9 @@ class SurfaceRegistration {
   // counted in the step. Applied to the model (LiverModel::set_surface_loads) from its next
   // step; successive calls converge. A registration step that diverges (rolled back) on loads
   // no step has yet taken without diverging (note_step) returns to the loads before them for
-  // its retry (RegistrationFrame::hidden_loads_reverted). Returns hidden_load_total(). Costs one solve with three
-  // columns per untouched patch. It is apply_hidden_loads(hidden_load_fit(compliance, springs,
-  // hidden_loads())).
+  // its retry (RegistrationFrame::hidden_loads_reverted). Returns hidden_load_total(). Costs
+  // one solve with three columns per touched patch (J by its adjoint: A is symmetric). It is
+  // apply_hidden_loads(hidden_load_fit(compliance, springs, hidden_loads())).
   double estimate_hidden_loads(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs);
   // The linearised fit of that step, with `loads` as the current ones: its solves are the cost,
   // and it reads nothing a registration changes after construction (the patches), so another

@@ -1,5 +1,6 @@
 #include "liver_sim/registration.h"
 
+#include <Eigen/SparseCore>
 #include <pcl/registration/icp.h>
 
 #include <algorithm>
@@ -206,18 +207,33 @@ SurfaceRegistration::HiddenLoadFit SurfaceRegistration::hidden_load_fit(StateCom
   const std::vector<Eigen::Vector3d> pull = patch_spring_forces(patches_, F, springs, x);
   const std::vector<double> w = patch_weights(pull);
   const int n = 3 * static_cast<int>(fit.patches.size());
-  Eigen::MatrixXd Phi = Eigen::MatrixXd::Zero(x.size(), n), U;
+  std::vector<Eigen::Triplet<double>> entries;
   for (size_t k = 0; k < fit.patches.size(); ++k) {
     const int p = fit.patches[k];
     for (size_t i = 0; i < patches_.nodes[p].size(); ++i)
-      for (int a = 0; a < 3; ++a) Phi(3 * patches_.nodes[p][i] + a, 3 * k + a) = patches_.weights[p][i];
+      for (int a = 0; a < 3; ++a) entries.emplace_back(3 * patches_.nodes[p][i] + a, 3 * k + a, patches_.weights[p][i]);
   }
-  if (n > 0) compliance.solve(Phi, U);
-  // J: the change of each touched patch's pull per unit load (the springs are linear in x).
-  fit.J.resize(3 * pull.size(), n);
-  for (int c = 0; c < n; ++c) {
-    const std::vector<Eigen::Vector3d> moved = patch_spring_forces(patches_, F, springs, x + U.col(c));
-    for (size_t p = 0; p < pull.size(); ++p) fit.J.block<3, 1>(3 * p, c) = std::sqrt(w[p]) * (moved[p] - pull[p]);
+  Eigen::SparseMatrix<double> Phi(x.size(), n);
+  Phi.setFromTriplets(entries.begin(), entries.end());
+  // J = S A^-1 Phi, S the touched patches' pull per unit state change (the springs are linear
+  // in x), solved as (A^-1 S^T)^T Phi (A is symmetric): three columns per touched patch rather
+  // than per loaded one, which are the more at a partial view.
+  std::vector<int> column(pull.size(), -1);
+  int m = 0;
+  for (size_t p = 0; p < pull.size(); ++p)
+    if (touched[p]) column[p] = 3 * m++;
+  Eigen::MatrixXd St = Eigen::MatrixXd::Zero(x.size(), 3 * m), V;
+  for (const SurfaceTarget& t : springs) {
+    const Eigen::Matrix3d along = t.normal.isZero(0.0) ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(t.normal * t.normal.transpose());
+    for (int j = 0; j < 3; ++j)
+      St.block<3, 3>(3 * F(t.triangle, j), column[patches_.triangle_patch[t.triangle]]) -= t.stiffness * t.weights[j] * along;
+  }
+  fit.J = Eigen::MatrixXd::Zero(3 * pull.size(), n);
+  if (n > 0 && m > 0) {
+    compliance.solve(St, V);
+    const Eigen::MatrixXd VtPhi = V.transpose() * Phi;
+    for (size_t p = 0; p < pull.size(); ++p)
+      if (touched[p]) fit.J.middleRows<3>(3 * p) = std::sqrt(w[p]) * VtPhi.middleRows<3>(column[p]);
   }
   fit.r.resize(3 * pull.size());
   for (size_t p = 0; p < pull.size(); ++p) fit.r.segment<3>(3 * p) = std::sqrt(w[p]) * pull[p];
