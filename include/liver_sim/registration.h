@@ -122,19 +122,21 @@ class SurfaceRegistration {
   // (but for the instruments), so a net pull of the springs on a patch of it (a few cm, where
   // the sensor's noise cancels) measures what the model gets wrong. `springs` are the cloud's
   // springs `compliance` was factorised with (cloud_springs() then). Each candidate not held is
-  // tried linearised at the state `compliance` was factorised at: a
-  // reaction spread over its nodes holding their mean at rest, R = (Phi^T A^-1 Phi)^-1 Phi^T
-  // (X - x), moves the state by A^-1 Phi R, and the pull is evaluated there. The best one is held (at most one per call: the next call sees
-  // its effect); held candidates stay held until clear(). Returns the candidate newly held, or
+  // tried linearised at x, the equilibrium the state `compliance` was factorised at is on its
+  // way to (StateCompliance::equilibrium): a reaction spread over its nodes holding their mean
+  // at rest, R = (Phi^T A^-1 Phi)^-1 Phi^T (X - x), moves the state by A^-1 Phi R, and the pull
+  // is evaluated there. The best one is held (at most one per call: the next call sees its
+  // effect); held candidates stay held until clear(). Returns the candidate newly held, or
   // -1. Costs one solve with three columns per candidate.
   int estimate_supports(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs);
   // The tissue's stiffness factor (LiverModel::set_stiffness_scale) the clouds call for: the
   // surface the camera sees is free of forces (but for the instruments), so the springs' net
   // pull on the patches they touch, r_p, measures what the model gets wrong; a model too soft
   // sags where the cloud does not, a model too stiff resists the cloud's deformation. One
-  // Gauss-Newton step on ln s minimising sum_p |r_p|^2, linearised at the state `compliance`
-  // was factorised at with its springs (as estimate_supports): a factor e^t moves the state by
-  // -t A^-1 f_int, which changes r_p by t J_p, so t = -sum r_p.J_p / sum |J_p|^2 (at most a
+  // Gauss-Newton step on ln s minimising sum_p |r_p|^2, linearised at the equilibrium of the
+  // state `compliance` was factorised at with its springs (as estimate_supports): a factor e^t
+  // moves the state by -t A^-1 f_int, which changes r_p by t J_p, so t = -sum r_p.J_p / sum
+  // |J_p|^2 (at most a
   // factor 2 per call, the factor within [options.min_tissue_stiffness_factor,
   // options.max_tissue_stiffness_factor]). Applied to the model from its next step; successive
   // calls (one per analysis) converge it. Returns the factor (unchanged when both bounds are 1).
@@ -146,8 +148,9 @@ class SurfaceRegistration {
   // patches they touch is what the model lacks, and in surgery the forces that deform the liver
   // act where the camera does not look (the diaphragm, a retractor, a ligament). One damped
   // Gauss-Newton step on a force per untouched patch (its unit force spread as in
-  // SurfacePatches), g, linearised at the state `compliance` was factorised at with its springs
-  // (as estimate_supports): g moves the state by A^-1 Phi g, which changes r_p by J_p g;
+  // SurfacePatches), g, linearised at the equilibrium of the state `compliance` was factorised
+  // at with its springs (as estimate_supports): g moves the state by A^-1 Phi g, which changes
+  // r_p by J_p g;
   // minimises sum_p w_p |r_p + J_p dg|^2 + lambda |g + dg|^2, w_p Huber weights of width twice
   // the median |r_p| (as the stiffness estimate), lambda = options.hidden_load_damping times
   // the mean diagonal of J^T W J (the loads stay the smallest that explain the pull). A patch

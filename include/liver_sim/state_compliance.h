@@ -26,6 +26,12 @@ class StateCompliance {
   void solve(const Eigen::MatrixXd& forces, Eigen::MatrixXd& displacements);
   // The tissue's internal forces (N) at the factorised state.
   const Eigen::VectorXd& internal_forces() const { return internal_; }
+  // Where a full static solve would take the factorised state, linearised: x + A^-1 r, r the
+  // out-of-balance force (loads + springs + surface loads - internal forces). A registration
+  // stepped by a Newton iteration or two per update is on its way there, and what the analyses
+  // read of the springs' pull is the pull there. Instruments are not in r: the analysis's
+  // model knows none.
+  const Eigen::VectorXd& equilibrium() const { return equilibrium_; }
   // The positions the factor was made at.
   const Eigen::VectorXd& state() const { return state_; }
   LiverModel& model() { return model_; }
@@ -34,7 +40,7 @@ class StateCompliance {
   LiverModel& model_;
   CholmodSolver factor_;
   std::vector<double> values_;
-  Eigen::VectorXd internal_, state_;
+  Eigen::VectorXd internal_, state_, equilibrium_;
   Eigen::MatrixXd free_forces_;
 };
 

@@ -49,9 +49,10 @@ class TargetUncertainty {
   TargetUncertainty(LiverModel& model, const UncertaintyOptions& options);
 
   // Covariances (m^2) of tracked_targets(model), in its order, at the state `compliance` was
-  // factorised at, with the model's surface loads: the total and its three parts. `cloud_springs`: the springs of the cloud
-  // (SurfaceRegistration::cloud_springs), whose forces scale the unknown ones and whose
-  // lengths are the noise.
+  // factorised at, with the model's surface loads: the total and its three parts.
+  // `cloud_springs`: the springs of the cloud (SurfaceRegistration::cloud_springs), whose forces
+  // scale the unknown ones and whose lengths are the noise, both read at the equilibrium that
+  // state is on its way to (StateCompliance::equilibrium).
   struct Covariance {
     Eigen::Matrix3d total, forces, stiffness, noise;
   };

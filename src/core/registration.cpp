@@ -122,7 +122,7 @@ int SurfaceRegistration::estimate_supports(StateCompliance& compliance, const st
   for (size_t c = 0; c < supports_.size(); ++c)
     if (!held_[c]) tried.push_back(static_cast<int>(c));
   if (tried.empty()) return -1;
-  const Eigen::VectorXd& x = compliance.state();
+  const Eigen::VectorXd& x = compliance.equilibrium();
   const double before = systematic_pull(springs, x);
   if (!(before > 0)) return -1;
   // Phi: per candidate, unit forces in x, y, z spread over its nodes; U = A^-1 Phi.
@@ -163,7 +163,7 @@ double SurfaceRegistration::estimate_tissue_stiffness(StateCompliance& complianc
                                                       const std::vector<SurfaceTarget>& springs) {
   const double scale = model_.stiffness_scale();
   if (springs.empty() || !options_.estimates_tissue_stiffness()) return scale;
-  const Eigen::VectorXd& x = compliance.state();
+  const Eigen::VectorXd& x = compliance.equilibrium();
   const Eigen::MatrixX3i& F = model_.boundary();
   const std::vector<Eigen::Vector3d> pull = patch_spring_forces(patches_, F, springs, x);
   Eigen::MatrixXd u;
@@ -195,7 +195,7 @@ SurfaceRegistration::HiddenLoadFit SurfaceRegistration::hidden_load_fit(StateCom
   HiddenLoadFit fit;
   if (!options_.estimate_hidden_loads || springs.empty()) return fit;
   fit.loads = loads;
-  const Eigen::VectorXd& x = compliance.state();
+  const Eigen::VectorXd& x = compliance.equilibrium();
   const Eigen::MatrixX3i& F = model_.boundary();
   std::vector<char> touched(patches_.centres.size(), 0);
   for (const SurfaceTarget& t : springs) touched[patches_.triangle_patch[t.triangle]] = 1;

@@ -16,6 +16,13 @@ void StateCompliance::factorize() {
   m.assemble(1.0, 0.0, values_);
   if (!factor_.factorize(values_))
     throw std::runtime_error("the registered model's stiffness is not positive definite");
+  Eigen::VectorXd out_of_balance;
+  m.external_forces(state_, out_of_balance);
+  m.add_target_forces(state_, out_of_balance);
+  out_of_balance -= internal_;
+  Eigen::MatrixXd way;
+  solve(out_of_balance, way);  // zero at the supports
+  equilibrium_ = state_ + way.col(0);
 }
 
 void StateCompliance::solve(const Eigen::MatrixXd& forces, Eigen::MatrixXd& displacements) {

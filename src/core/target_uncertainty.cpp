@@ -75,12 +75,14 @@ std::vector<TargetUncertainty::Covariance> TargetUncertainty::covariances(StateC
   const Eigen::VectorXd& f_int = compliance.internal_forces();
 
   // The springs: the net force of each patch they pull on (its typical size scales the unknown
-  // forces), and their RMS length (the sensor's noise after the voxel grid's averaging). The
-  // pull is taken where the model would be without the hidden loads the registration found
-  // (x - A^-1 f, linearised; the springs are linear in x): the loads carry part of what the
-  // cloud shows of the surgery's forces, not less of it.
+  // forces), and their RMS length (the sensor's noise after the voxel grid's averaging), both
+  // where a full solve would take the state. The pull is taken where the model would be
+  // without the hidden loads the registration found (- A^-1 f, linearised; the springs are
+  // linear in x): the loads carry part of what the cloud shows of the surgery's forces, not
+  // less of it.
   const Eigen::MatrixX3i& F = m.boundary();
-  Eigen::VectorXd unloaded = x;
+  const Eigen::VectorXd& settled = compliance.equilibrium();
+  Eigen::VectorXd unloaded = settled;
   if (model_.surface_loads().size() == x.size()) {
     Eigen::MatrixXd moved;
     compliance.solve(model_.surface_loads(), moved);
@@ -92,7 +94,7 @@ std::vector<TargetUncertainty::Covariance> TargetUncertainty::covariances(StateC
   for (const SurfaceTarget& s : springs) {
     pulled[patches_.triangle_patch[s.triangle]] = 1;
     Eigen::Vector3d gap = -s.point;
-    for (int j = 0; j < 3; ++j) gap += s.weights[j] * node(x, F(s.triangle, j));
+    for (int j = 0; j < 3; ++j) gap += s.weights[j] * node(settled, F(s.triangle, j));
     length_squared += s.normal.isZero(0.0) ? gap.squaredNorm() : std::pow(s.normal.dot(gap), 2);
   }
   double sum = 0;
