@@ -298,10 +298,10 @@ class LiverSimNode {
   bool simulate_frame(bool must_step) {
     bool stepped = false;
     const StepResult r = guard_.step(*model_, [&] {
-      adopt_analysis();
+      const bool estimates_changed = adopt_analysis();
       std::optional<RegistrationFrame> registered = register_pending_cloud();
       if (registered) registering_ = analysis_due_ = true;
-      stepped = registered || must_step;
+      stepped = registered || must_step || estimates_changed;
       // While clouds come, the model converges on the last one in the registration's short
       // steps, so that the next cloud waits for one iteration, not a full solve.
       if (registered) return warn_on_reverted_loads(*registered).step;
@@ -583,12 +583,14 @@ class LiverSimNode {
   // A finished analysis, if one is: its covariances shown, the registration's estimates
   // (candidate supports, the tissue's stiffness) solved on its factor with the springs it was
   // made with, and the step of the hidden loads' fit the analysis made. (simulation thread)
-  void adopt_analysis() {
+  // Returns whether the estimates changed the model (the tissue's stiffness, the hidden loads):
+  // then it must step, clouds or not.
+  bool adopt_analysis() {
     std::optional<UncertaintyWorker::Result> result = analysis_->take();
-    if (!result || result->tag != analysis_generation_) return;
+    if (!result || result->tag != analysis_generation_) return false;
     if (!result->error.empty()) {
       ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", result->error.c_str());
-      return;
+      return false;
     }
     covariances_.clear();
     for (const TargetUncertainty::Covariance& c : result->covariances) covariances_.push_back(c.total);
@@ -597,11 +599,15 @@ class LiverSimNode {
     try {
       const int held = registration_->estimate_supports(analysis_->compliance(), result->cloud_springs);
       if (held >= 0) ROS_INFO("liver_sim: the clouds call for candidate support %d: held from the next cloud", held);
+      const double stiffness = model_->stiffness_scale();
+      const std::vector<Eigen::Vector3d> loads = registration_->hidden_loads();
       registration_->estimate_tissue_stiffness(analysis_->compliance(), result->cloud_springs);  // both registration.*_tissue_stiffness_factor 1: off
       registration_->apply_hidden_loads(result->hidden_loads);  // fitted on the worker's thread; empty when off
+      return model_->stiffness_scale() != stiffness || registration_->hidden_loads() != loads;
     } catch (const std::runtime_error& e) {
       ROS_WARN_THROTTLE(5.0, "liver_sim: no support, stiffness or hidden loads estimate: %s", e.what());
     }
+    return false;
   }
 
   bool on_reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
