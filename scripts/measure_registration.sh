@@ -3,7 +3,7 @@
 # registration in the node with scripts/measure_registration.py: clouds of a moving surface at
 # 15 Hz (about 6,000 and 90,000 points), registered clouds per second, cloud-to-mesh latency, and a 1M-point cloud's filter
 # time. Build first (scripts/run.sh). usage: scripts/measure_registration.sh [SECONDS] [NODE ARGUMENTS]
-# (e.g. _registration/estimate_hidden_loads:=true)
+# (e.g. _registration/estimate_hidden_loads:=false)
 source "$(dirname "$0")/ros_env.sh" 11499
 roscore -p 11499 >/dev/null 2>&1 & MASTER=$!
 sleep 3

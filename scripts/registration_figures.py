@@ -6,13 +6,15 @@ parenchyma E = 15 kPa, the right triangular ligament attached, which the model d
 into BUILD/truth, then runs register_bench (depth camera, 10 frames per case) and writes into
 OUT (default doc/):
   registration_grid.csv          4 surgical scenarios x model stiffness 0.5, 1, 2 x the truth's
-                                 (30% visible, 1 mm depth noise at 25 cm), the scene's settings
+                                 (30% visible, 1 mm depth noise at 25 cm), the springs alone
+                                 (registration.estimate_hidden_loads false), as every run below
+                                 but the hidden loads' ones
   registration_grid_targets.csv  every target's error and covariance of those cases
   registration_grid_estimated.csv the same cases with the tissue's stiffness estimated from the
                                  clouds (registration.{min,max}_tissue_stiffness_factor 0.25, 4)
   registration_grid_stiffen.csv  the same, the clouds allowed to stiffen the model only (1, 4)
-  registration_grid_hidden_loads.csv the same cases with the hidden loads estimated
-                                 (registration.estimate_hidden_loads)
+  registration_grid_hidden_loads.csv the same cases with the hidden loads estimated (the
+                                 scene's default)
   registration_sweep_hidden_loads.csv  the lift and the breathing, model 2x too soft and too
                                  stiff, over depth noise and visible fraction, the stiffness
                                  fixed (hidden_load_n 0) and with the hidden loads estimated
@@ -45,9 +47,10 @@ BENCH = os.path.join(REPO, "build/ws/devel/lib/liver_sim/register_bench")
 SCENE = os.path.join(REPO, "config/scenes/liver_phantom.yaml")
 TRUTH_STIFFNESS = 0.5  # truth E over the model's (make_truth_phantom.py --stiffness-ratio)
 SCENARIOS = ["lift", "press", "breathing", "pneumoperitoneum"]
-ESTIMATE = ["--set", "registration.min_tissue_stiffness_factor=0.25", "--set", "registration.max_tissue_stiffness_factor=4"]
-STIFFEN = ["--set", "registration.min_tissue_stiffness_factor=1", "--set", "registration.max_tissue_stiffness_factor=4"]
-HIDDEN = ["--set", "registration.estimate_hidden_loads=true"]
+SPRINGS = ["--set", "registration.estimate_hidden_loads=false"]
+ESTIMATE = SPRINGS + ["--set", "registration.min_tissue_stiffness_factor=0.25", "--set", "registration.max_tissue_stiffness_factor=4"]
+STIFFEN = SPRINGS + ["--set", "registration.min_tissue_stiffness_factor=1", "--set", "registration.max_tissue_stiffness_factor=4"]
+HIDDEN = []  # the scene's default
 
 
 def fmt(values):
@@ -153,8 +156,8 @@ def main():
     noise = [1e-3] if args.quick else [0.5e-3, 1e-3, 2e-3, 4e-3]
     os.makedirs(args.out, exist_ok=True)
 
-    grid = bench(args, ["--truth-scene", truth, "--scenario", ",".join(scenarios), "--stiffness", fmt(model_scales)],
-                 os.path.join(args.out, "registration_grid_targets.csv"))
+    grid = bench(args, ["--truth-scene", truth, "--scenario", ",".join(scenarios), "--stiffness", fmt(model_scales)]
+                 + SPRINGS, os.path.join(args.out, "registration_grid_targets.csv"))
     write(grid, os.path.join(args.out, "registration_grid.csv"))
     estimated = bench(args, ["--truth-scene", truth, "--scenario", ",".join(scenarios), "--stiffness", fmt(model_scales)]
                       + ESTIMATE)
@@ -168,17 +171,17 @@ def main():
     two = [f"{TRUTH_STIFFNESS * 2:g}"]
     wrong = fmt([TRUTH_STIFFNESS * 0.5, TRUTH_STIFFNESS * 2])
     sweep_h = []
-    for extra in ([], HIDDEN):  # the grid's 1 mm and 30% left out
+    for extra in (SPRINGS, HIDDEN):  # the grid's 1 mm and 30% left out
         for axis, values in (("--noise", [v for v in noise if v != 1e-3]), ("--visible", [v for v in visible if v != 0.3])):
             if values:
                 sweep_h += bench(args, ["--truth-scene", truth, "--scenario", "lift,breathing", "--stiffness", wrong,
                                         axis, fmt(values)] + extra)
     if sweep_h:
         write(sweep_h, os.path.join(args.out, "registration_sweep_hidden_loads.csv"))
-    sweep_v = bench(args, ["--truth-scene", truth, "--stiffness", two[0], "--visible", fmt(visible)])
-    sweep_n = bench(args, ["--truth-scene", truth, "--stiffness", two[0], "--noise", fmt(noise)])
-    crime_v = bench(args, ["--visible", fmt(visible)])
-    crime_n = bench(args, ["--noise", fmt(noise)])
+    sweep_v = bench(args, ["--truth-scene", truth, "--stiffness", two[0], "--visible", fmt(visible)] + SPRINGS)
+    sweep_n = bench(args, ["--truth-scene", truth, "--stiffness", two[0], "--noise", fmt(noise)] + SPRINGS)
+    crime_v = bench(args, ["--visible", fmt(visible)] + SPRINGS)
+    crime_n = bench(args, ["--noise", fmt(noise)] + SPRINGS)
     write(sweep_v + sweep_n, os.path.join(args.out, "registration_sweep.csv"))
     sweep_e = bench(args, ["--truth-scene", truth, "--stiffness", two[0], "--noise", fmt(noise)] + ESTIMATE)
     write(sweep_e, os.path.join(args.out, "registration_sweep_estimated.csv"))

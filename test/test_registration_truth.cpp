@@ -549,6 +549,7 @@ struct Beam {
     r.uncertainty.patch_spacing = 0.015;
     r.candidate_supports = {box({0.08 - 1e-9, -1, -1}, {1, 1, 1}),         // the far end
                             box({0.03, -1, -1}, {0.05, 1, 1e-9})};         // the bottom's middle
+    r.estimate_hidden_loads = false;  // the springs' own pull: the candidates' and the stiffness's tests
     truth_scene = model_scene;
     if (truth_held_at_the_far_end) truth_scene.fixed.push_back(box({0.08 - 1e-9, -1, -1}, {1, 1, 1}));
     mesh = load_scene_mesh(model_scene);

@@ -211,9 +211,9 @@ struct RegistrationOptions {
   // Forces on the surface the camera does not see (the diaphragm, a retractor, a ligament's
   // reaction) that take the springs' systematic pull off the surface it sees
   // (SurfaceRegistration::estimate_hidden_loads); not with the stiffness estimate or candidate
-  // supports. Off by default: in the node test's lifted lobe they leave the tumour 2.1 mm off,
-  // against under 2 mm without (doc/registration.md#in-the-node).
-  bool estimate_hidden_loads = false;
+  // supports (turn it off to use either). On by default: against the independent truth they
+  // carry what the camera does not see (doc/registration.md#results).
+  bool estimate_hidden_loads = true;
   double hidden_load_damping = 3.0;  // -, in [1e-6, 1e3]: Tikhonov weight on the loads, over the mean
                                      // diagonal of the fit's normal matrix
   UncertaintyOptions uncertainty;

@@ -182,7 +182,7 @@ std::string validate(const RegistrationOptions& o) {
        // Each estimate takes the same pull away on the same factor: together they would
        // correct it twice (not measured together).
        o.estimate_hidden_loads && (o.estimates_tissue_stiffness() || !o.candidate_supports.empty())
-           ? "registration.estimate_hidden_loads: not with the tissue's stiffness estimated or candidate supports"
+           ? "registration.estimate_hidden_loads: not with the tissue's stiffness estimated or candidate supports (set it false to use them)"
            : "",
        within("registration.uncertainty.patch_spacing", o.uncertainty.patch_spacing, 1e-3, 1, "in [1e-3, 1] m"),
        non_negative("registration.uncertainty.force_ratio", o.uncertainty.force_ratio),
