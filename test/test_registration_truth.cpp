@@ -355,11 +355,12 @@ UncertaintyWorker::Result wait_for(UncertaintyWorker& worker) {
 }
 
 TEST(UncertaintyWorker, AnalysesTheStateItIsHandedOnAModelOfItsOwn) {
-  // The registered phantom with a stiffer tissue and the capsule on, analysed by the worker on
-  // its own model, against the analysis on the caller's model: the same to round-off (the
-  // elements' polar iterations start from each model's last rotations). Mutations seen
-  // failing: the stiffness factor, the springs, the positions, the surface loads or the capsule
-  // not handed over (each alone).
+  // The registered phantom with a stiffer tissue and the capsule on, a probe pressing its top,
+  // analysed by the worker on its own model (no instrument), against the analysis on the
+  // caller's model: the same to round-off (the elements' polar iterations start from each
+  // model's last rotations). Mutations seen failing: the stiffness factor, the springs, the
+  // positions, the surface loads, the capsule or the instrument's forces not handed over
+  // (each alone).
   RestPhantom p;
   const std::vector<int> top = p.above(0.05);
   std::vector<Eigen::Vector3d> points;
@@ -376,6 +377,14 @@ TEST(UncertaintyWorker, AnalysesTheStateItIsHandedOnAModelOfItsOwn) {
   Eigen::VectorXd loads = Eigen::VectorXd::Zero(p.model.positions().size());
   loads(3 * p.model.boundary()(top.back(), 0) + 2) = -0.5;  // N, as a hidden load
   p.model.set_surface_loads(loads);
+  InstrumentOptions probe;
+  probe.name = "probe";
+  probe.radius = 0.005;
+  probe.position = p.on_triangle(top[top.size() / 2], probe.radius - 2e-3);  // 2 mm into the top
+  p.model.add_instrument(probe);
+  p.model.step();  // not converged: the worker takes the state as it is
+  const Eigen::VectorXd pressed = p.model.contact().forces(p.model.positions());
+  ASSERT_GT(pressed.norm(), 0.0);
   ASSERT_TRUE(worker.start(p.model, registration.cloud_springs(), 7));
   EXPECT_FALSE(worker.start(p.model, registration.cloud_springs(), 8));  // one at a time
   const UncertaintyWorker::Result r = wait_for(worker);
@@ -384,6 +393,7 @@ TEST(UncertaintyWorker, AnalysesTheStateItIsHandedOnAModelOfItsOwn) {
   EXPECT_EQ(r.tag, 7u);
   EXPECT_EQ(r.cloud_springs.size(), registration.cloud_springs().size());
   StateCompliance compliance(p.model);
+  compliance.set_instrument_forces(pressed);
   compliance.factorize();
   TargetUncertainty direct(p.model, p.options.uncertainty);
   const std::vector<TargetUncertainty::Covariance> expected = direct.covariances(compliance, registration.cloud_springs());
@@ -490,8 +500,10 @@ TEST(StateCompliance, AStateOffEquilibriumKnowsTheWayThere) {
   // A sagging cantilever pulled up by springs 1 mm above its top and pushed by surface loads:
   // at its equilibrium the way there is nil; from the rest shape and from half-way, one linear
   // solve lands near that equilibrium (Newton's first iteration: its error much smaller than
-  // the way, 1.7% and 1.4% of it). Mutations seen failing: the springs and surface loads left
-  // out of the out-of-balance force; the scene's loads left out; its sign flipped.
+  // the way, 1.7% and 1.4% of it). Pressed by a probe too, the equilibrium is its state again
+  // when the probe's forces are handed over, and the tissue let go of without them. Mutations
+  // seen failing: the springs and surface loads left out of the out-of-balance force; the
+  // scene's loads left out; its sign flipped; the instruments' forces left out.
   const Scene s = cantilever(1e5);
   const TetMesh mesh = load_scene_mesh(s);
   LiverModel model(mesh, s);
@@ -525,6 +537,23 @@ TEST(StateCompliance, AStateOffEquilibriumKnowsTheWayThere) {
     const double off = (compliance.equilibrium() - equilibrium).norm(), way = (model.positions() - equilibrium).norm();
     EXPECT_LT(off, 0.05 * way) << "from " << share << " of the way: " << off << " m off a way of " << way << " m";
   }
+  InstrumentOptions probe;
+  probe.name = "probe";
+  probe.radius = 0.003;
+  double top = -1;  // the free end's top, sagged
+  for (int i = 0; i < mesh.V.rows(); ++i)
+    if (mesh.V(i, 0) > 0.04 - 1e-9) top = std::max(top, equilibrium[3 * i + 2]);
+  probe.position = Eigen::Vector3d(0.036, 0.005, top + probe.radius - 5e-4);  // 0.5 mm into it
+  model.add_instrument(probe);
+  ASSERT_TRUE(model.step().converged());
+  const Eigen::VectorXd pressed = model.contact().forces(model.positions());
+  ASSERT_GT(pressed.norm(), 0.1 * loads.norm());
+  compliance.factorize();
+  const double let_go = (compliance.equilibrium() - model.positions()).norm();
+  compliance.set_instrument_forces(pressed);
+  compliance.factorize();
+  const double held = (compliance.equilibrium() - model.positions()).norm();
+  EXPECT_LT(held, 1e-3 * let_go) << held << " m against " << let_go << " m without the probe's forces";
 }
 
 // An 8 x 2 x 1 cm beam clamped at x = 0 (the model), or at both ends (the truth), under
@@ -702,9 +731,9 @@ TEST(TissueStiffness, TheCloudsCallForTheTruthsStiffness) {
 TEST(TissueStiffness, AStateOnItsWayCallsForWhatEquilibriumDoes) {
   // As the hidden loads (HiddenLoads.AStateOnItsWayAsksTheLoadsForWhatEquilibriumDoes): the
   // truth 1.5x as stiff, the first estimate from the equilibrium on the first cloud's springs
-  // and from half-way from there to the truth: ln 1.52 against ln 1.43, 17% apart (the
+  // and from half-way from there to the truth: ln 1.43 and ln 1.52, 17% apart (the
   // sensitivity is still the state's). Mutation seen failing: the pull taken at the state
-  // itself (ln 1.23, 41% apart).
+  // itself (ln 1.23 from half-way, 41% apart).
   Beam beam(false);
   beam.truth_scene.parenchyma.young_modulus *= 1.5;
   beam.model_scene.registration.candidate_supports.clear();
@@ -860,8 +889,8 @@ TEST(HiddenLoads, AStateOnItsWayAsksTheLoadsForWhatEquilibriumDoes) {
   // per update, not on an equilibrium. The lifted beam registered to its cloud, fitted once at
   // equilibrium with the springs and once at a state half-way from there to the truth (the
   // same springs): the fit takes the pull where a full solve would take the state, so both ask
-  // for the same lift. Mutation seen failing: the pull taken at the state itself (half the
-  // pull there: 0.16 N asked for against 0.37 N).
+  // for the same lift (0.375 N and 0.356 N up). Mutation seen failing: the pull taken at the
+  // state itself (less pull there: 0.220 N asked for).
   Beam beam = lifted_beam(true);
   const pcl::PointCloud<pcl::PointXYZ> top = beam.top_cloud();
   LiverModel truth(beam.mesh, beam.truth_scene);

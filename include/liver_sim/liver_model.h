@@ -128,6 +128,7 @@ class LiverModel {
   // The parts, for tests and tools that look inside.
   MechanicalModel& mechanics() { return mechanics_; }
   InstrumentContact& contact() { return contact_; }
+  const InstrumentContact& contact() const { return contact_; }
   NewtonStepper& stepper() { return stepper_; }
 
  private:

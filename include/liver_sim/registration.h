@@ -117,8 +117,9 @@ class SurfaceRegistration {
   void request_rigid_alignment() { align_requested_ = true; }
 
   // Attachments the segmentation did not show. A candidate support (options.candidate_supports)
-  // is held, from the next cloud on, when holding it would take at least options.support_gain of
-  // the springs' systematic pull away: the surface the camera sees is free of forces in surgery
+  // is held, from the model's next step, when holding it would take at least
+  // options.support_gain of the springs' systematic pull away: the surface the camera sees is
+  // free of forces in surgery
   // (but for the instruments), so a net pull of the springs on a patch of it (a few cm, where
   // the sensor's noise cancels) measures what the model gets wrong. `springs` are the cloud's
   // springs `compliance` was factorised with (cloud_springs() then). Each candidate not held is

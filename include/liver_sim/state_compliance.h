@@ -27,11 +27,16 @@ class StateCompliance {
   // The tissue's internal forces (N) at the factorised state.
   const Eigen::VectorXd& internal_forces() const { return internal_; }
   // Where a full static solve would take the factorised state, linearised: x + A^-1 r, r the
-  // out-of-balance force (loads + springs + surface loads - internal forces). A registration
-  // stepped by a Newton iteration or two per update is on its way there, and what the analyses
-  // read of the springs' pull is the pull there. Instruments are not in r: the analysis's
-  // model knows none.
+  // out-of-balance force (the scene's loads at the model's load scale + springs + surface loads
+  // + the instruments' forces below - internal forces). A registration stepped by a Newton
+  // iteration or two per update is on its way there, and what the analyses read of the
+  // springs' pull is the pull there.
   const Eigen::VectorXd& equilibrium() const { return equilibrium_; }
+  // The forces instruments exert on the tissue at the state factorize() will take (N per DOF;
+  // empty: none), counted in r as dead forces: the model handed over for an analysis has no
+  // instruments (UncertaintyWorker hands over its caller's), and without them the equilibrium
+  // would be the tissue's with the instruments let go.
+  void set_instrument_forces(Eigen::VectorXd forces) { instrument_forces_ = std::move(forces); }
   // The positions the factor was made at.
   const Eigen::VectorXd& state() const { return state_; }
   LiverModel& model() { return model_; }
@@ -40,7 +45,7 @@ class StateCompliance {
   LiverModel& model_;
   CholmodSolver factor_;
   std::vector<double> values_;
-  Eigen::VectorXd internal_, state_, equilibrium_;
+  Eigen::VectorXd internal_, state_, equilibrium_, instrument_forces_;
   Eigen::MatrixXd free_forces_;
 };
 

@@ -18,7 +18,9 @@ void StateCompliance::factorize() {
     throw std::runtime_error("the registered model's stiffness is not positive definite");
   Eigen::VectorXd out_of_balance;
   m.external_forces(state_, out_of_balance);
+  out_of_balance *= model_.load_scale();
   m.add_target_forces(state_, out_of_balance);
+  if (instrument_forces_.size() == out_of_balance.size()) out_of_balance += instrument_forces_;
   out_of_balance -= internal_;
   Eigen::MatrixXd way;
   solve(out_of_balance, way);  // zero at the supports

@@ -38,6 +38,7 @@ bool UncertaintyWorker::start(const LiverModel& model, std::vector<SurfaceTarget
     model_->set_surface_targets(model.surface_targets());
     model_->set_surface_loads(model.surface_loads());
     model_->set_positions(model.positions());
+    compliance_.set_instrument_forces(model.contact().forces(model.positions()));
     result_ = Result();
     result_.tag = tag;
     result_.cloud_springs = std::move(cloud_springs);

@@ -583,8 +583,8 @@ class LiverSimNode {
   // A finished analysis, if one is: its covariances shown, the registration's estimates
   // (candidate supports, the tissue's stiffness) solved on its factor with the springs it was
   // made with, and the step of the hidden loads' fit the analysis made. (simulation thread)
-  // Returns whether the estimates changed the model (the tissue's stiffness, the hidden loads):
-  // then it must step, clouds or not.
+  // Returns whether the estimates changed the model (a support held, the tissue's stiffness, the
+  // hidden loads): then it must step, clouds or not.
   bool adopt_analysis() {
     std::optional<UncertaintyWorker::Result> result = analysis_->take();
     if (!result || result->tag != analysis_generation_) return false;
@@ -598,12 +598,12 @@ class LiverSimNode {
     analysis_stamp_ = analysis_started_at_;
     try {
       const int held = registration_->estimate_supports(analysis_->compliance(), result->cloud_springs);
-      if (held >= 0) ROS_INFO("liver_sim: the clouds call for candidate support %d: held from the next cloud", held);
+      if (held >= 0) ROS_INFO("liver_sim: the clouds call for candidate support %d: held from the next step", held);
       const double stiffness = model_->stiffness_scale();
       const std::vector<Eigen::Vector3d> loads = registration_->hidden_loads();
       registration_->estimate_tissue_stiffness(analysis_->compliance(), result->cloud_springs);  // both registration.*_tissue_stiffness_factor 1: off
       registration_->apply_hidden_loads(result->hidden_loads);  // fitted on the worker's thread; empty when off
-      return model_->stiffness_scale() != stiffness || registration_->hidden_loads() != loads;
+      return held >= 0 || model_->stiffness_scale() != stiffness || registration_->hidden_loads() != loads;
     } catch (const std::runtime_error& e) {
       ROS_WARN_THROTTLE(5.0, "liver_sim: no support, stiffness or hidden loads estimate: %s", e.what());
     }
