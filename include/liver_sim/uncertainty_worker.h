@@ -5,8 +5,9 @@
 //
 // The thread works on a model of its own (the same mesh and scene as the caller's), brought to
 // the state handed over: positions, the springs, the tissue's stiffness factor and the capsule,
-// all that the static stiffness K + springs depends on, and the hidden loads (the unknown
-// forces' scale is taken without them). It runs at a lower priority (nice
+// all that the static stiffness K + springs depends on, the hidden loads (the unknown
+// forces' scale is taken without them) and the instruments' forces (its model has no
+// instruments: StateCompliance::set_instrument_forces). It runs at a lower priority (nice
 // +10): where it shares a core with the simulation, the frames come first, and still it gets
 // about a tenth of a core that other programs keep busy.
 #pragma once
