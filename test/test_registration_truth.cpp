@@ -8,6 +8,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <random>
 #include <thread>
 
@@ -728,6 +729,28 @@ TEST(TissueStiffness, TheCloudsCallForTheTruthsStiffness) {
   }
 }
 
+// The beam registered to one cloud of its truth's top and solved: `estimate` runs on a
+// registration of its own at that equilibrium, then on another at a state half-way from there
+// to the truth with the same springs (the node's analyses meet states its frames have not
+// converged).
+void at_equilibrium_and_on_its_way(
+    Beam& beam, const std::function<void(SurfaceRegistration&, StateCompliance&, bool on_its_way)>& estimate) {
+  const pcl::PointCloud<pcl::PointXYZ> top = beam.top_cloud();
+  LiverModel truth(beam.mesh, beam.truth_scene);
+  ASSERT_TRUE(truth.step().converged());
+  for (const bool on_its_way : {false, true}) {
+    LiverModel model(beam.mesh, beam.model_scene);
+    ASSERT_TRUE(model.step().converged());
+    SurfaceRegistration registration(model, beam.model_scene.registration);
+    ASSERT_NE(registration.register_cloud(top, Eigen::Vector3d(0.03, 0.01, 0.3)).step.status, StepResult::Status::Diverged);
+    ASSERT_TRUE(model.step().converged());
+    if (on_its_way) model.set_positions(0.5 * (model.positions() + truth.positions()));
+    StateCompliance compliance(model);
+    compliance.factorize();
+    estimate(registration, compliance, on_its_way);
+  }
+}
+
 TEST(TissueStiffness, AStateOnItsWayCallsForWhatEquilibriumDoes) {
   // As the hidden loads (HiddenLoads.AStateOnItsWayAsksTheLoadsForWhatEquilibriumDoes): the
   // truth 1.5x as stiff, the first estimate from the equilibrium on the first cloud's springs
@@ -738,21 +761,10 @@ TEST(TissueStiffness, AStateOnItsWayCallsForWhatEquilibriumDoes) {
   beam.truth_scene.parenchyma.young_modulus *= 1.5;
   beam.model_scene.registration.candidate_supports.clear();
   beam.model_scene.registration.max_tissue_stiffness_factor = 4;
-  const pcl::PointCloud<pcl::PointXYZ> top = beam.top_cloud();
-  LiverModel truth(beam.mesh, beam.truth_scene);
-  ASSERT_TRUE(truth.step().converged());
   double factor[2];
-  for (const bool on_its_way : {false, true}) {
-    LiverModel model(beam.mesh, beam.model_scene);
-    ASSERT_TRUE(model.step().converged());
-    SurfaceRegistration registration(model, beam.model_scene.registration);
-    ASSERT_NE(registration.register_cloud(top, Eigen::Vector3d(0.03, 0.01, 0.3)).step.status, StepResult::Status::Diverged);
-    ASSERT_TRUE(model.step().converged());
-    if (on_its_way) model.set_positions(0.5 * (model.positions() + truth.positions()));
-    StateCompliance compliance(model);
-    compliance.factorize();
+  at_equilibrium_and_on_its_way(beam, [&](SurfaceRegistration& registration, StateCompliance& compliance, bool on_its_way) {
     factor[on_its_way] = registration.estimate_tissue_stiffness(compliance, registration.cloud_springs());
-  }
+  });
   ASSERT_GT(factor[0], 1.1);  // stiffer, within a step's bound of 2
   EXPECT_NEAR(std::log(factor[1]), std::log(factor[0]), 0.25 * std::log(factor[0]))
       << "on its way " << factor[1] << ", at equilibrium " << factor[0];
@@ -892,23 +904,12 @@ TEST(HiddenLoads, AStateOnItsWayAsksTheLoadsForWhatEquilibriumDoes) {
   // for the same lift (0.375 N and 0.356 N up). Mutation seen failing: the pull taken at the
   // state itself (less pull there: 0.220 N asked for).
   Beam beam = lifted_beam(true);
-  const pcl::PointCloud<pcl::PointXYZ> top = beam.top_cloud();
-  LiverModel truth(beam.mesh, beam.truth_scene);
-  ASSERT_TRUE(truth.step().converged());
   Eigen::Vector3d net[2];
-  for (const bool on_its_way : {false, true}) {
-    LiverModel model(beam.mesh, beam.model_scene);
-    ASSERT_TRUE(model.step().converged());
-    SurfaceRegistration registration(model, beam.model_scene.registration);
-    ASSERT_NE(registration.register_cloud(top, Eigen::Vector3d(0.03, 0.01, 0.3)).step.status, StepResult::Status::Diverged);
-    ASSERT_TRUE(model.step().converged());
-    if (on_its_way) model.set_positions(0.5 * (model.positions() + truth.positions()));
-    StateCompliance compliance(model);
-    compliance.factorize();
+  at_equilibrium_and_on_its_way(beam, [&](SurfaceRegistration& registration, StateCompliance& compliance, bool on_its_way) {
     registration.estimate_hidden_loads(compliance, registration.cloud_springs());
     net[on_its_way].setZero();
     for (const Eigen::Vector3d& g : registration.hidden_loads()) net[on_its_way] += g;
-  }
+  });
   ASSERT_GT(net[0].z(), 0.2);  // the lift found
   EXPECT_NEAR(net[1].z(), net[0].z(), 0.1 * net[0].z()) << "on its way " << net[1].transpose() << ", at equilibrium " << net[0].transpose();
 }
