@@ -119,9 +119,8 @@ class SurfaceRegistration {
   // Attachments the segmentation did not show. A candidate support (options.candidate_supports)
   // is held, from the model's next step, when holding it would take at least
   // options.support_gain of the springs' systematic pull away: the surface the camera sees is
-  // free of forces in surgery
-  // (but for the instruments), so a net pull of the springs on a patch of it (a few cm, where
-  // the sensor's noise cancels) measures what the model gets wrong. `springs` are the cloud's
+  // free of forces in surgery (but for the instruments), so a net pull of the springs on a
+  // patch of it (a few cm, where the sensor's noise cancels) measures what the model gets wrong. `springs` are the cloud's
   // springs `compliance` was factorised with (cloud_springs() then). Each candidate not held is
   // tried linearised at x, the equilibrium the state `compliance` was factorised at is on its
   // way to (StateCompliance::equilibrium): a reaction spread over its nodes holding their mean
@@ -136,10 +135,9 @@ class SurfaceRegistration {
   // sags where the cloud does not, a model too stiff resists the cloud's deformation. One
   // Gauss-Newton step on ln s minimising sum_p |r_p|^2, linearised at the equilibrium of the
   // state `compliance` was factorised at with its springs (as estimate_supports): a factor e^t
-  // moves the state by -t A^-1 f_int, which changes r_p by t J_p, so t = -sum r_p.J_p / sum
-  // |J_p|^2 (at most a
-  // factor 2 per call, the factor within [options.min_tissue_stiffness_factor,
-  // options.max_tissue_stiffness_factor]). Applied to the model from its next step; successive
+  // moves the state by -t A^-1 f_int (f_int at the state itself), which changes r_p by t J_p,
+  // so t = -sum r_p.J_p / sum |J_p|^2 (at most a factor 2 per call, the factor within
+  // [options.min_tissue_stiffness_factor, options.max_tissue_stiffness_factor]). Applied to the model from its next step; successive
   // calls (one per analysis) converge it. Returns the factor (unchanged when both bounds are 1).
   // Costs one solve with one column.
   double estimate_tissue_stiffness(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs);
@@ -151,10 +149,10 @@ class SurfaceRegistration {
   // Gauss-Newton step on a force per untouched patch (its unit force spread as in
   // SurfacePatches), g, linearised at the equilibrium of the state `compliance` was factorised
   // at with its springs (as estimate_supports): g moves the state by A^-1 Phi g, which changes
-  // r_p by J_p g;
-  // minimises sum_p w_p |r_p + J_p dg|^2 + lambda |g + dg|^2, w_p Huber weights of width twice
-  // the median |r_p| (as the stiffness estimate), lambda = options.hidden_load_damping times
-  // the mean diagonal of J^T W J (the loads stay the smallest that explain the pull). A patch
+  // r_p by J_p g; minimises sum_p w_p |r_p + J_p dg|^2 + lambda |g + dg|^2, w_p Huber weights
+  // of width twice the median |r_p| (as the stiffness estimate), lambda =
+  // options.hidden_load_damping times the mean diagonal of J^T W J (the loads stay the smallest
+  // that explain the pull). A patch
   // the springs touch carries no load: one that had a load drops it, its effect on the pull
   // counted in the step. Applied to the model (LiverModel::set_surface_loads) from its next
   // step; successive calls converge. A registration step that diverges (rolled back) on loads
