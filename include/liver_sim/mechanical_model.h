@@ -36,6 +36,10 @@ struct SurfaceTarget {
   Eigen::Vector3d point = Eigen::Vector3d::Zero();     // m
   Eigen::Vector3d normal = Eigen::Vector3d::Zero();    // unit (point-to-plane) or zero (point-to-point)
   double stiffness = 0;                                // N/m, >= 0
+  // The directions the spring pulls along: n n^T (point-to-plane) or the identity.
+  Eigen::Matrix3d projector() const {
+    return normal.isZero(0.0) ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(normal * normal.transpose());
+  }
 };
 
 // Follower pressure on boundary triangles (Pa, > 0 pushes inward).

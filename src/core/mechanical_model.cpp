@@ -459,8 +459,7 @@ void MechanicalModel::assemble(double k, double m, std::vector<double>& values) 
   Matrix9d Kt;
   for (const SurfaceTarget& t : surface_targets_) {
     const Eigen::Matrix3d ww = t.stiffness * t.weights * t.weights.transpose();
-    const Eigen::Matrix3d P =
-        t.normal.isZero(0.0) ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(t.normal * t.normal.transpose());
+    const Eigen::Matrix3d P = t.projector();
     for (int a = 0; a < 3; ++a)
       for (int b = 0; b < 3; ++b) Kt.block<3, 3>(3 * a, 3 * b) = ww(a, b) * P;
     scatter_add(Kt, &tri_map_[81 * t.triangle], values);

@@ -224,7 +224,7 @@ SurfaceRegistration::HiddenLoadFit SurfaceRegistration::hidden_load_fit(StateCom
     if (touched[p]) column[p] = 3 * m++;
   Eigen::MatrixXd St = Eigen::MatrixXd::Zero(x.size(), 3 * m), V;
   for (const SurfaceTarget& t : springs) {
-    const Eigen::Matrix3d along = t.normal.isZero(0.0) ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(t.normal * t.normal.transpose());
+    const Eigen::Matrix3d along = t.projector();
     for (int j = 0; j < 3; ++j)
       St.block<3, 3>(3 * F(t.triangle, j), column[patches_.triangle_patch[t.triangle]]) -= t.stiffness * t.weights[j] * along;
   }
