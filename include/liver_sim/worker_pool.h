@@ -92,5 +92,10 @@ std::string set_realtime_priority(int priority);
 // CHOLMOD's OpenMP regions on it (cholmod_solver.cpp). The nice value is per thread on Linux; a
 // thread started by the simulation's would otherwise inherit its real-time scheduling.
 void lower_calling_thread_priority();
+// Memory the process frees stays with it, for the next allocation to reuse: no block under
+// 32 MiB is mapped for itself, and the heap is not given back to the system. Otherwise a
+// block freed by one analysis or cloud and allocated again by the next is handed back and
+// faulted in again, page by page. The resident size then stays at its high-water mark.
+void keep_freed_memory();
 
 }  // namespace liver_sim

@@ -939,6 +939,7 @@ class LiverSimNode {
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "liver_sim");
+  liver_sim::keep_freed_memory();  // the clouds and the analyses free and allocate the same blocks again
   ros::NodeHandle nh, pnh("~");
   // The simulation thread (this one): its processors and its scheduling, set before the model
   // is built so that the model's helper threads inherit them. Refused settings leave it as it was.
