@@ -35,6 +35,8 @@ liver_sim::TargetCovariances covariances;
 int status_count = 0, pose_count = 0, marker_count = 0, covariance_count = 0, ellipsoid_count = 0;
 ros::WallTime last_analysis;  // when covariances of a new analysis came
 double hidden_loads = -1;  // N, the sum /diagnostics reports
+double analysis_time = -1;  // s, the processor time of the last analysis, as /diagnostics reports it
+long steps = -1, factorizations = -1;  // /diagnostics: steps and the factorisations in them
 
 // The camera in the model frame: at the synthetic view's eye, turned 90 degrees about x, so
 // that camera and model coordinates differ by a rotation and a translation.
@@ -85,6 +87,9 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
         for (const diagnostic_msgs::DiagnosticStatus& d : m->status)
           for (const diagnostic_msgs::KeyValue& kv : d.values)
             if (kv.key == "hidden loads, sum of magnitudes (N)") hidden_loads = std::stod(kv.value);
+            else if (kv.key == "last analysis processor time (s)") analysis_time = std::stod(kv.value);
+            else if (kv.key == "steps") steps = std::stol(kv.value);
+            else if (kv.key == "factorisations in the steps") factorizations = std::stol(kv.value);
       }));
   ros::Publisher cloud_pub = nh.advertise<sensor_msgs::PointCloud2>("points", 1);
 
@@ -227,6 +232,13 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
   EXPECT_LT(mean, 0.08 * unregistered) << "unregistered " << unregistered;
   EXPECT_LT(tumour, 1e-3);
   EXPECT_LT(worst, 2e-3);
+  // What the node reports of its work: the first step factorised, and no frame more than a
+  // handful of times (a cloud's frame: three updates, each factorised at most twice); the
+  // analysis, a factorisation of the phantom (~1e9 floating-point operations), cannot have
+  // taken under a millisecond.
+  EXPECT_GE(factorizations, 1);
+  EXPECT_LE(factorizations, 8 * steps);
+  EXPECT_GT(analysis_time, 1e-3);
 
   // The targets' uncertainty: every target, in the order of ~target_poses, with a symmetric
   // positive semi-definite position block (m^2) and its 95% ellipsoid.

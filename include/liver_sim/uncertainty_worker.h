@@ -1,6 +1,6 @@
 // The targets' uncertainty analysis (target_uncertainty.h) on a thread of its own, ROS-free: its
-// factorisation and solves (about 80 ms of CPU on the phantom at a depth camera's density) then
-// hold up no frame of the simulation. The caller hands over the registered state and takes the
+// factorisation and solves (about 90 ms of processor time on the phantom at a depth camera's
+// density) then hold up no frame of the simulation. The caller hands over the registered state and takes the
 // covariances when they are ready; meanwhile its frames go on.
 //
 // The thread works on a model of its own (the same mesh and scene as the caller's), brought to
@@ -53,6 +53,7 @@ class UncertaintyWorker {
     std::vector<SurfaceTarget> cloud_springs;                  // those handed to start()
     SurfaceRegistration::HiddenLoadFit hidden_loads;           // empty without a registration or when off
     std::string error;  // why there are no covariances (a stiffness not positive definite, ...)
+    double cpu_time = 0;  // s, the processor time the analysis took on its thread
   };
   // The finished analysis, once; nothing while it runs or when none was started.
   std::optional<Result> take();

@@ -1,9 +1,16 @@
 #include "liver_sim/uncertainty_worker.h"
 
+#include <ctime>
 #include <stdexcept>
 
 namespace liver_sim {
 namespace {
+
+double thread_cpu_time() {  // s
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
 
 bool finite(const std::vector<TargetUncertainty::Covariance>& covariances) {
   for (const TargetUncertainty::Covariance& c : covariances)
@@ -54,6 +61,7 @@ std::optional<UncertaintyWorker::Result> UncertaintyWorker::take() {
 }
 
 void UncertaintyWorker::analyse() {
+  const double started = thread_cpu_time();
   std::vector<TargetUncertainty::Covariance> covariances;
   std::string error;
   try {
@@ -70,6 +78,7 @@ void UncertaintyWorker::analyse() {
   }
   result_.covariances = std::move(covariances);
   result_.error = std::move(error);
+  result_.cpu_time = thread_cpu_time() - started;
 }
 
 }  // namespace liver_sim

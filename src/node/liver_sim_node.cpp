@@ -297,6 +297,7 @@ class LiverSimNode {
   // Returns whether the next frame must step.
   bool simulate_frame(bool must_step) {
     bool stepped = false;
+    int factorized = 0;  // in this frame's steps (a registration's may take two)
     const StepResult r = guard_.step(*model_, [&] {
       const bool estimates_changed = adopt_analysis();
       std::optional<RegistrationFrame> registered = register_pending_cloud();
@@ -304,14 +305,19 @@ class LiverSimNode {
       stepped = registered || must_step || estimates_changed;
       // While clouds come, the model converges on the last one in the registration's short
       // steps, so that the next cloud waits for one iteration, not a full solve.
-      if (registered) return warn_on_reverted_loads(*registered).step;
+      if (registered) {
+        factorized = registered->factorizations;
+        return warn_on_reverted_loads(*registered).step;
+      }
       if (!stepped) return StepResult();
       if (registering_) {
         registered_ = registration_->refine();  // a later update of the cloud may have moved the fit
+        factorized = registered_.factorizations;
         return warn_on_reverted_loads(registered_).step;
       }
       const StepResult step = model_->step();
       registration_->note_step(step);
+      factorized = step.factorizations;
       return step;
     });
     if (guard_.last_step_faulted()) {
@@ -332,6 +338,7 @@ class LiverSimNode {
     if (r.status != StepResult::Status::NotConverged && !registration_->updates_pending()) registering_ = false;
     if (r.status != StepResult::Status::Diverged) start_analysis();
     ++steps_;
+    factorizations_ += factorized;
     step_times_.push_back(ros::WallTime::now());
     last_ = r;
     state_ = r.status == StepResult::Status::Diverged ? "diverged"
@@ -369,7 +376,7 @@ class LiverSimNode {
       covariances_.clear();
       analysis_due_ = false;
       ++analysis_generation_;  // an analysis still running describes the state before
-      steps_ = 0;
+      steps_ = factorizations_ = 0;
       reflected_stamp_ = ros::Time();
     }
     if (capsule) {
@@ -588,6 +595,7 @@ class LiverSimNode {
   bool adopt_analysis() {
     std::optional<UncertaintyWorker::Result> result = analysis_->take();
     if (!result || result->tag != analysis_generation_) return false;
+    analysis_cpu_time_ = result->cpu_time;
     if (!result->error.empty()) {
       ROS_WARN_THROTTLE(5.0, "liver_sim: no target uncertainty: %s", result->error.c_str());
       return false;
@@ -843,6 +851,7 @@ class LiverSimNode {
                                                         : DiagnosticStatus::OK;
     stat.summary(level, state_);
     stat.add("steps", steps_);
+    stat.add("factorisations in the steps", factorizations_);  // the frames' largest cost (~40 ms each on the phantom)
     stat.add("last step time (s)", last_.timing.total_ms / 1000.0);
     stat.add("residual", last_.residual);
     stat.add("active contacts", last_.contacts);
@@ -857,6 +866,7 @@ class LiverSimNode {
     stat.add("registration inlier fraction", registered_.inlier_fraction);
     stat.add("registration RMS of all points (m)", registered_.rms_all);
     stat.add("target 95% radius, largest (m)", largest_radius_95());
+    stat.add("last analysis processor time (s)", analysis_cpu_time_);
     stat.add("tissue stiffness factor", model_->stiffness_scale());
     stat.add("hidden loads, sum of magnitudes (N)", registration_->hidden_load_total());
     stat.add("last cloud size", last_cloud_points_);
@@ -893,6 +903,7 @@ class LiverSimNode {
   StepGuard guard_;
   StepResult last_;
   uint64_t steps_ = 0;
+  uint64_t factorizations_ = 0;  // in the steps since start or reset
   std::string state_ = "idle";
   std::deque<ros::WallTime> step_times_;  // of the steps in the last second
   ros::Time reflected_stamp_;
@@ -905,6 +916,7 @@ class LiverSimNode {
   ros::WallTime next_analysis_;
   ros::Time analysis_started_at_;  // the state the running analysis describes
   ros::Time analysis_stamp_;       // the state covariances_ describe
+  double analysis_cpu_time_ = 0;   // s, on the analysis's thread, of the last one adopted
   uint64_t analysis_generation_ = 0;  // a reset or a new capsule: analyses started before are void
 
   // Shared with the heartbeat, under status_mutex_.
