@@ -755,9 +755,10 @@ void at_equilibrium_and_on_its_way(
 TEST(TissueStiffness, AStateOnItsWayCallsForWhatEquilibriumDoes) {
   // As the hidden loads (HiddenLoads.AStateOnItsWayAsksTheLoadsForWhatEquilibriumDoes): the
   // truth 1.5x as stiff, the first estimate from the equilibrium on the first cloud's springs
-  // and from half-way from there to the truth: ln 1.43 and ln 1.52, 17% apart (the
-  // sensitivity is still the state's). Mutation seen failing: the pull taken at the state
-  // itself (ln 1.23 from half-way, 41% apart).
+  // and from half-way from there to the truth: ln 1.431 and ln 1.433, 0.4% apart. Mutations
+  // seen failing: the pull taken at the state itself (ln 1.23 from half-way, 41% apart); the
+  // sensitivity's internal forces taken at the state instead of its equilibrium (ln 1.52, 17%
+  // apart).
   Beam beam(false);
   beam.truth_scene.parenchyma.young_modulus *= 1.5;
   beam.model_scene.registration.candidate_supports.clear();
@@ -767,7 +768,7 @@ TEST(TissueStiffness, AStateOnItsWayCallsForWhatEquilibriumDoes) {
     factor[on_its_way] = registration.estimate_tissue_stiffness(compliance, registration.cloud_springs());
   });
   ASSERT_GT(factor[0], 1.1);  // stiffer, within a step's bound of 2
-  EXPECT_NEAR(std::log(factor[1]), std::log(factor[0]), 0.25 * std::log(factor[0]))
+  EXPECT_NEAR(std::log(factor[1]), std::log(factor[0]), 0.05 * std::log(factor[0]))
       << "on its way " << factor[1] << ", at equilibrium " << factor[0];
 }
 

@@ -24,8 +24,10 @@ class StateCompliance {
   // Displacements (columns, m) under forces (columns, N), zero at the supports (forces there
   // are ignored). Needs factorize().
   void solve(const Eigen::MatrixXd& forces, Eigen::MatrixXd& displacements);
-  // The tissue's internal forces (N) at the factorised state.
-  const Eigen::VectorXd& internal_forces() const { return internal_; }
+  // The tissue's internal forces (N) at equilibrium(): the forces applied there, which they
+  // balance (at the supports, without the reactions). -A^-1 of them is how that equilibrium
+  // moves per unit log-stiffness of the tissue.
+  const Eigen::VectorXd& equilibrium_internal_forces() const { return equilibrium_internal_; }
   // Where a full static solve would take the factorised state, linearised: x + A^-1 r, r the
   // out-of-balance force (the scene's loads at the model's load scale + springs + surface loads
   // + the instruments' forces below - internal forces). A registration stepped by a Newton
@@ -42,10 +44,14 @@ class StateCompliance {
   LiverModel& model() { return model_; }
 
  private:
+  // The scene's loads at the model's load scale, the springs, the surface loads and the
+  // instruments' forces, at positions x.
+  void applied_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
+
   LiverModel& model_;
   CholmodSolver factor_;
   std::vector<double> values_;
-  Eigen::VectorXd internal_, state_, equilibrium_, instrument_forces_;
+  Eigen::VectorXd state_, equilibrium_, equilibrium_internal_, instrument_forces_;
   Eigen::MatrixXd free_forces_;
 };
 

@@ -13,7 +13,8 @@
 //     on any patch. The pull is taken without the model's surface loads (the hidden loads the
 //     registration found, linearised), which carry part of it;
 //   - the tissue's stiffness, a factor exp(s), s ~ N(0, stiffness_log_sd^2): the state moves by
-//     -A^-1 f_int s (f_int: the tissue's internal forces at the state);
+//     -A^-1 f_int s (f_int: the tissue's internal forces at the equilibrium the state is on
+//     its way to, StateCompliance::equilibrium);
 //   - the sensor: each spring's point moves along its normal by the springs' RMS length.
 // Cost: with A factorised (state_compliance.h), one solve with 3 right-hand sides per target and
 // products over the patches' nodes. Options: RegistrationOptions::uncertainty (options.h).

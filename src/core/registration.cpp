@@ -167,7 +167,7 @@ double SurfaceRegistration::estimate_tissue_stiffness(StateCompliance& complianc
   const Eigen::MatrixX3i& F = model_.boundary();
   const std::vector<Eigen::Vector3d> pull = patch_spring_forces(patches_, F, springs, x);
   Eigen::MatrixXd u;
-  compliance.solve(-compliance.internal_forces(), u);  // d x / d ln s
+  compliance.solve(-compliance.equilibrium_internal_forces(), u);  // d x / d ln s
   const std::vector<Eigen::Vector3d> moved = patch_spring_forces(patches_, F, springs, x + u.col(0));
   const std::vector<double> w = patch_weights(pull);
   double along = 0, squared = 0;

@@ -12,19 +12,26 @@ StateCompliance::StateCompliance(LiverModel& model) : model_(model) {
 void StateCompliance::factorize() {
   MechanicalModel& m = model_.mechanics();
   state_ = model_.positions();
-  m.internal_forces(state_, internal_);  // also the element rotations the tangent is taken at
+  Eigen::VectorXd internal;
+  m.internal_forces(state_, internal);  // also the element rotations the tangent is taken at
   m.assemble(1.0, 0.0, values_);
   if (!factor_.factorize(values_))
     throw std::runtime_error("the registered model's stiffness is not positive definite");
   Eigen::VectorXd out_of_balance;
-  m.external_forces(state_, out_of_balance);
-  out_of_balance *= model_.load_scale();
-  m.add_target_forces(state_, out_of_balance);
-  if (instrument_forces_.size() == out_of_balance.size()) out_of_balance += instrument_forces_;
-  out_of_balance -= internal_;
+  applied_forces(state_, out_of_balance);
+  out_of_balance -= internal;
   Eigen::MatrixXd way;
   solve(out_of_balance, way);  // zero at the supports
   equilibrium_ = state_ + way.col(0);
+  applied_forces(equilibrium_, equilibrium_internal_);
+}
+
+void StateCompliance::applied_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
+  const MechanicalModel& m = model_.mechanics();
+  m.external_forces(x, f);
+  f *= model_.load_scale();
+  m.add_target_forces(x, f);  // the springs and the surface loads
+  if (instrument_forces_.size() == f.size()) f += instrument_forces_;
 }
 
 void StateCompliance::solve(const Eigen::MatrixXd& forces, Eigen::MatrixXd& displacements) {

@@ -72,7 +72,7 @@ std::vector<TargetUncertainty::Covariance> TargetUncertainty::covariances(StateC
       for (int a = 0; a < 3; ++a) B(3 * T(embedding_[i].tet, k) + a, 3 * i + a) += embedding_[i].barycentric[k];
   compliance.solve(B, Z);
   const MechanicalModel& m = model_.mechanics();
-  const Eigen::VectorXd& f_int = compliance.internal_forces();
+  const Eigen::VectorXd& f_int = compliance.equilibrium_internal_forces();
 
   // The springs: the net force of each patch they pull on (its typical size scales the unknown
   // forces), and their RMS length (the sensor's noise after the voxel grid's averaging), both
@@ -108,8 +108,8 @@ std::vector<TargetUncertainty::Covariance> TargetUncertainty::covariances(StateC
   std::vector<Covariance> covariance(targets);
   // Unknown patch forces: G = Phi^T Z (target displacements per unit patch force).
   const Eigen::MatrixXd G = patch_forces_.transpose() * Z;
-  // Stiffness: the state's shift per unit log-stiffness, -A^-1 f_int (f_int is zero at no DOF
-  // the solve sees as fixed: the supports' rows of Z are zero).
+  // Stiffness: the equilibrium's shift per unit log-stiffness, -A^-1 f_int, f_int the internal
+  // forces there (the supports' rows of Z are zero: their reactions do not count).
   const Eigen::VectorXd stiffness_shift = Z.transpose() * f_int;
   // Noise: a spring's point moved by u along its normal moves the state by A^-1 k w n u.
   Eigen::MatrixXd noise = Eigen::MatrixXd::Zero(springs.size(), 3 * targets);
