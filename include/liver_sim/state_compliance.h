@@ -24,9 +24,9 @@ class StateCompliance {
   // Displacements (columns, m) under forces (columns, N), zero at the supports (forces there
   // are ignored). Needs factorize().
   void solve(const Eigen::MatrixXd& forces, Eigen::MatrixXd& displacements);
-  // The tissue's internal forces (N) at equilibrium(): the forces applied there, which they
-  // balance (at the supports, without the reactions). -A^-1 of them is how that equilibrium
-  // moves per unit log-stiffness of the tissue.
+  // The tissue's internal forces (N) at equilibrium(), taken as the forces applied there: at an
+  // equilibrium they balance them (but for the supports' reactions), and x̄ is one to first
+  // order. -A^-1 of them is how that equilibrium moves per unit log-stiffness of the tissue.
   const Eigen::VectorXd& equilibrium_internal_forces() const { return equilibrium_internal_; }
   // Where a full static solve would take the factorised state, linearised: x + A^-1 r, r the
   // out-of-balance force (the scene's loads at the model's load scale + springs + surface loads

@@ -1,13 +1,14 @@
 // The targets' uncertainty analysis (target_uncertainty.h) on a thread of its own, ROS-free: its
 // factorisation and solves (about 90 ms of processor time on the phantom at a depth camera's
-// density) then hold up no frame of the simulation. The caller hands over the registered state and takes the
-// covariances when they are ready; meanwhile its frames go on.
+// density) then hold up no frame of the simulation. The caller hands over the registered state
+// and takes the covariances when they are ready; meanwhile its frames go on.
 //
 // The thread works on a model of its own (the same mesh and scene as the caller's), brought to
 // the state handed over: positions, the springs, the tissue's stiffness factor and the capsule,
-// all that the static stiffness K + springs depends on, the hidden loads (the unknown
-// forces' scale is taken without them) and the instruments' forces (its model has no
-// instruments: StateCompliance::set_instrument_forces). It runs at a lower priority (nice
+// all that the static stiffness K + springs depends on; the load scale, the hidden loads (the
+// unknown forces' scale is taken without them) and the instruments' forces (its model has no
+// instruments: StateCompliance::set_instrument_forces), which the equilibrium it reads at
+// depends on too. It runs at a lower priority (nice
 // +10): where it shares a core with the simulation, the frames come first, and still it gets
 // about a tenth of a core that other programs keep busy.
 #pragma once

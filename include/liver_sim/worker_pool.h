@@ -96,6 +96,7 @@ void lower_calling_thread_priority();
 // 32 MiB is mapped for itself, and the heap is not given back to the system. Otherwise a
 // block freed by one analysis or cloud and allocated again by the next is handed back and
 // faulted in again, page by page. The resident size then stays at its high-water mark.
-void keep_freed_memory();
+// Returns false when the allocator refused (the process keeps its defaults).
+bool keep_freed_memory();
 
 }  // namespace liver_sim

@@ -42,6 +42,7 @@ bool UncertaintyWorker::start(const LiverModel& model, std::vector<SurfaceTarget
       }
     }
     model_->set_stiffness_scale(model.stiffness_scale());
+    model_->set_load_scale(model.load_scale());
     model_->set_surface_targets(model.surface_targets());
     model_->set_surface_loads(model.surface_loads());
     model_->set_positions(model.positions());

@@ -134,9 +134,9 @@ void lower_calling_thread_priority() {
   omp_set_max_active_levels(0);
 }
 
-void keep_freed_memory() {
-  mallopt(M_MMAP_THRESHOLD, 32 << 20);  // glibc's largest (HEAP_MAX_SIZE / 2 on 64-bit systems)
-  mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max());
+bool keep_freed_memory() {
+  return mallopt(M_MMAP_THRESHOLD, 32 << 20) == 1 &&  // glibc's largest (HEAP_MAX_SIZE / 2, 64-bit)
+         mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max()) == 1;
 }
 
 }  // namespace liver_sim

@@ -297,7 +297,7 @@ class LiverSimNode {
   // Returns whether the next frame must step.
   bool simulate_frame(bool must_step) {
     bool stepped = false;
-    int factorized = 0;  // in this frame's steps (a registration's may take two)
+    int factorized = 0;  // in this frame's steps (a cloud's: up to three updates, each tried twice)
     const StepResult r = guard_.step(*model_, [&] {
       const bool estimates_changed = adopt_analysis();
       std::optional<RegistrationFrame> registered = register_pending_cloud();
@@ -323,6 +323,7 @@ class LiverSimNode {
     if (guard_.last_step_faulted()) {
       // Retried at the next frame: the fault may have been passing (memory, an injected one).
       ++steps_;
+      factorizations_ += factorized;  // those of a step rolled back for a non-finite value (one that threw: none known)
       step_times_.push_back(ros::WallTime::now());
       last_ = r;
       state_ = "fault";
@@ -951,7 +952,8 @@ class LiverSimNode {
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "liver_sim");
-  liver_sim::keep_freed_memory();  // the clouds and the analyses free and allocate the same blocks again
+  // The clouds and the analyses free and allocate the same blocks again, frame after frame.
+  if (!liver_sim::keep_freed_memory()) ROS_WARN("liver_sim: the allocator keeps handing freed memory back to the system");
   ros::NodeHandle nh, pnh("~");
   // The simulation thread (this one): its processors and its scheduling, set before the model
   // is built so that the model's helper threads inherit them. Refused settings leave it as it was.
