@@ -136,8 +136,9 @@ class SurfaceRegistration {
   // Gauss-Newton step on ln s minimising sum_p |r_p|^2, linearised at the equilibrium of the
   // state `compliance` was factorised at with its springs (as estimate_supports): a factor e^t
   // moves that equilibrium by -t A^-1 f_int (f_int there: the forces applied there, balanced),
-  // which changes r_p by t J_p, so t = -sum r_p.J_p / sum |J_p|^2 (at most a factor 2 per call, the factor within
-  // [options.min_tissue_stiffness_factor, options.max_tissue_stiffness_factor]). Applied to the model from its next step; successive
+  // which changes r_p by t J_p, so t = -sum r_p.J_p / sum |J_p|^2 (at most a factor 2 per
+  // call, the factor within [options.min_tissue_stiffness_factor,
+  // options.max_tissue_stiffness_factor]). Applied to the model from its next step; successive
   // calls (one per analysis) converge it. Returns the factor (unchanged when both bounds are 1).
   // Costs one solve with one column.
   double estimate_tissue_stiffness(StateCompliance& compliance, const std::vector<SurfaceTarget>& springs);

@@ -8,9 +8,9 @@
 // all that the static stiffness K + springs depends on; the load scale, the hidden loads (the
 // unknown forces' scale is taken without them) and the instruments' forces (its model has no
 // instruments: StateCompliance::set_instrument_forces), which the equilibrium it reads at
-// depends on too. It runs at a lower priority (nice
-// +10): where it shares a core with the simulation, the frames come first, and still it gets
-// about a tenth of a core that other programs keep busy.
+// depends on too. It runs at a lower priority (nice +10): where it shares a core with the
+// simulation, the frames come first, and still it gets about a tenth of a core that other
+// programs keep busy.
 #pragma once
 
 #include <cstdint>

@@ -323,7 +323,7 @@ class LiverSimNode {
     if (guard_.last_step_faulted()) {
       // Retried at the next frame: the fault may have been passing (memory, an injected one).
       ++steps_;
-      factorizations_ += factorized;  // those of a step rolled back for a non-finite value (one that threw: none known)
+      factorizations_ += factorized;  // a step that threw tells none
       step_times_.push_back(ros::WallTime::now());
       last_ = r;
       state_ = "fault";
@@ -852,7 +852,7 @@ class LiverSimNode {
                                                         : DiagnosticStatus::OK;
     stat.summary(level, state_);
     stat.add("steps", steps_);
-    stat.add("factorisations in the steps", factorizations_);  // the frames' largest cost (~40 ms each on the phantom)
+    stat.add("factorisations in the steps", factorizations_);  // the frames' largest cost (33-38 ms each on the phantom)
     stat.add("last step time (s)", last_.timing.total_ms / 1000.0);
     stat.add("residual", last_.residual);
     stat.add("active contacts", last_.contacts);
