@@ -534,16 +534,17 @@ TEST(StateCompliance, AStateOffEquilibriumKnowsTheWayThere) {
   ASSERT_TRUE(model.step().converged());
   const Eigen::VectorXd equilibrium = model.positions();
   // The tissue's forces there, on the DOFs the supports leave free.
+  const std::vector<char>& fixed = model.mechanics().fixed_dofs();
+  auto free_dofs = [&](Eigen::VectorXd f) {
+    for (int i = 0; i < f.size(); ++i)
+      if (fixed[i]) f[i] = 0;
+    return f;
+  };
   Eigen::VectorXd internal;
   model.mechanics().internal_forces(equilibrium, internal);
-  const std::vector<char>& fixed = model.mechanics().fixed_dofs();
-  for (int i = 0; i < internal.size(); ++i)
-    if (fixed[i]) internal[i] = 0;
+  internal = free_dofs(internal);
   auto internal_error = [&](const StateCompliance& c) {
-    Eigen::VectorXd d = c.equilibrium_internal_forces() - internal;
-    for (int i = 0; i < d.size(); ++i)
-      if (fixed[i]) d[i] = 0;
-    return d.norm() / internal.norm();
+    return free_dofs(c.equilibrium_internal_forces() - internal).norm() / internal.norm();
   };
   StateCompliance compliance(model);
   compliance.factorize();
