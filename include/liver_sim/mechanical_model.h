@@ -40,6 +40,13 @@ struct SurfaceTarget {
   Eigen::Matrix3d projector() const {
     return normal.isZero(0.0) ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(normal * normal.transpose());
   }
+  // P (sum_j w_j x_j - p) at positions x (m): the stretch the spring resists; its force on the
+  // surface point is -stiffness times it, its energy 1/2 stiffness |stretch|^2.
+  Eigen::Vector3d stretch(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary) const {
+    Eigen::Vector3d gap = -point;
+    for (int j = 0; j < 3; ++j) gap += weights[j] * x.segment<3>(3 * boundary(triangle, j));
+    return normal.isZero(0.0) ? gap : Eigen::Vector3d(normal * normal.dot(gap));
+  }
 };
 
 // Follower pressure on boundary triangles (Pa, > 0 pushes inward).

@@ -402,10 +402,7 @@ double MechanicalModel::spring_stiffness() const {
 
 void MechanicalModel::add_target_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
   for (const SurfaceTarget& t : surface_targets_) {
-    Eigen::Vector3d on_surface = -t.point;
-    for (int j = 0; j < 3; ++j) on_surface += t.weights[j] * x.segment<3>(3 * boundary_(t.triangle, j));
-    const Eigen::Vector3d pull =
-        -t.stiffness * (t.normal.isZero(0.0) ? on_surface : Eigen::Vector3d(t.normal * t.normal.dot(on_surface)));
+    const Eigen::Vector3d pull = -t.stiffness * t.stretch(x, boundary_);
     for (int j = 0; j < 3; ++j) f.segment<3>(3 * boundary_(t.triangle, j)) += t.weights[j] * pull;
   }
   if (surface_loads_.size() != 0) f += surface_loads_;

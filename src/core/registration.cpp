@@ -612,11 +612,7 @@ double SurfaceRegistration::spring_rms() const {
   const Eigen::VectorXd& x = model_.positions();
   const Eigen::MatrixX3i& F = model_.boundary();
   double sum = 0;
-  for (const SurfaceTarget& t : targets) {
-    Eigen::Vector3d gap = -t.point;
-    for (int j = 0; j < 3; ++j) gap += t.weights[j] * node(x, F(t.triangle, j));
-    sum += t.normal.isZero(0.0) ? gap.squaredNorm() : std::pow(t.normal.dot(gap), 2);
-  }
+  for (const SurfaceTarget& t : targets) sum += t.stretch(x, F).squaredNorm();
   return std::sqrt(sum / targets.size());
 }
 

@@ -54,11 +54,7 @@ SurfacePatches make_surface_patches(MechanicalModel& m, double spacing) {
 std::vector<Eigen::Vector3d> patch_spring_forces(const SurfacePatches& patches, const Eigen::MatrixX3i& boundary,
                                                  const std::vector<SurfaceTarget>& springs, const Eigen::VectorXd& x) {
   std::vector<Eigen::Vector3d> force(patches.centres.size(), Eigen::Vector3d::Zero());
-  for (const SurfaceTarget& s : springs) {
-    Eigen::Vector3d gap = -s.point;
-    for (int j = 0; j < 3; ++j) gap += s.weights[j] * node(x, boundary(s.triangle, j));
-    force[patches.triangle_patch[s.triangle]] -= s.stiffness * (s.normal.isZero(0.0) ? gap : Eigen::Vector3d(s.normal * s.normal.dot(gap)));
-  }
+  for (const SurfaceTarget& s : springs) force[patches.triangle_patch[s.triangle]] -= s.stiffness * s.stretch(x, boundary);
   return force;
 }
 

@@ -93,9 +93,7 @@ std::vector<TargetUncertainty::Covariance> TargetUncertainty::covariances(StateC
   double length_squared = 0;
   for (const SurfaceTarget& s : springs) {
     pulled[patches_.triangle_patch[s.triangle]] = 1;
-    Eigen::Vector3d gap = -s.point;
-    for (int j = 0; j < 3; ++j) gap += s.weights[j] * node(settled, F(s.triangle, j));
-    length_squared += s.normal.isZero(0.0) ? gap.squaredNorm() : std::pow(s.normal.dot(gap), 2);
+    length_squared += s.stretch(settled, F).squaredNorm();
   }
   double sum = 0;
   int count = 0;

@@ -194,11 +194,7 @@ Truth make_truth(const Scene& scene, const SurgicalScenario& scenario, int frame
 // The springs' energy at the model's state (J): how hard the cloud pulls against the model.
 double spring_energy(const LiverModel& m) {
   double e = 0;
-  for (const SurfaceTarget& t : m.surface_targets()) {
-    Eigen::Vector3d gap = -t.point;
-    for (int j = 0; j < 3; ++j) gap += t.weights[j] * m.positions().segment<3>(3 * m.boundary()(t.triangle, j));
-    e += 0.5 * t.stiffness * (t.normal.isZero(0.0) ? gap.squaredNorm() : std::pow(t.normal.dot(gap), 2));
-  }
+  for (const SurfaceTarget& t : m.surface_targets()) e += 0.5 * t.stiffness * t.stretch(m.positions(), m.boundary()).squaredNorm();
   return e;
 }
 
