@@ -264,11 +264,11 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
 
   // The lift let go, seen in two clouds of the liver at rest sent one after the other: the
   // second's analysis waits for ~uncertainty_period after the first's, by when the node is
-  // idle. Its estimates (the hidden loads' fit, on its way from the lift's 5.6 N back towards
-  // none) change the model with no input to come, and the node must step on them.
-  // Dropping that step (stepping only on clouds, poses and unconverged steps) leaves the node
-  // idle on loads it never solved: killed (tried). Up to three pairs, until an analysis lands on
-  // an idle node (an idle node steps on nothing else).
+  // usually idle. An analysis's estimates (the hidden loads' fit, on its way from the lift's
+  // ~5 N back towards none) change the model with no input to come, and the node must step on
+  // them. Dropping that step (stepping only on clouds, poses and unconverged steps) leaves the
+  // node idle on loads it never solved: killed (tried). Up to three pairs, until one is seen
+  // idle with an analysis still to come (an idle node steps on nothing else).
   bool landed_idle = false;
   for (int pair = 0; pair < 3 && !landed_idle; ++pair) {
     ASSERT_TRUE(wait_for([&] { return ros::WallTime::now() - last_analysis > ros::WallDuration(1.5); }, 30.0));
@@ -280,13 +280,18 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
       ASSERT_TRUE(wait_for([&] { return status.clouds_registered == registered + 1; }, 30.0)) << status.text;
     }
     ASSERT_TRUE(wait_for([&] { return status.state == "idle" || analyses == analysed + 2; }, 30.0)) << status.text;
-    if (analyses == analysed + 2) continue;  // both analyses came while the node stepped
-    landed_idle = true;
     const uint64_t idle_step = status.step;
-    ASSERT_TRUE(wait_for([&] { return analyses == analysed + 2; }, 10.0)) << "no analysis after the second cloud";
+    // The covariances come on a topic of their own: a late one may be of an analysis adopted
+    // before the idle status. Still idle, on the same step and with an analysis to come after
+    // a short wait: none was.
+    wait_for([] { return false; }, 0.2);
+    if (analyses == analysed + 2 || status.step != idle_step) continue;
+    landed_idle = true;
+    ASSERT_TRUE(wait_for([&] { return analyses == analysed + 2; }, 10.0))
+        << "one analysis per cloud expected; the second cloud's did not come";
     EXPECT_TRUE(wait_for([&] { return status.step > idle_step; }, 2.0)) << "no step on the estimates of an analysis";
   }
-  EXPECT_TRUE(landed_idle) << "no analysis landed on an idle node in three pairs of clouds";
+  EXPECT_TRUE(landed_idle) << "in three pairs of clouds the node was never seen idle with an analysis to come";
 }
 
 }  // namespace
