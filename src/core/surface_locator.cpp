@@ -13,6 +13,13 @@ constexpr int kLeafTriangles = 4;
 
 Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
 
+// The squared distance from p to a box (0 inside), without the per-axis branches of Eigen's
+// AlignedBox::squaredExteriorDistance (two per axis and box).
+double squared_distance(const Eigen::Vector3d& p, const Eigen::AlignedBox3d& box) {
+  const Eigen::Vector3d outside = (box.min() - p).cwiseMax(0.0) + (p - box.max()).cwiseMax(0.0);
+  return outside.squaredNorm();
+}
+
 }  // namespace
 
 void SurfaceLocator::build(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary,
@@ -98,27 +105,36 @@ SurfaceLocator::Hit SurfaceLocator::closest(const Eigen::Vector3d& p, double cut
     }
   };
   if (hint >= 0 && hint < static_cast<int>(slot_of_row_.size()) && slot_of_row_[hint] >= 0) test(slot_of_row_[hint]);
-  // Depth first, the nearer child first; a median-split tree is at most log2(triangles) deep.
-  std::array<int, 64> stack;
+  // Depth first, into the nearer child at once, the farther one stacked with its distance (a
+  // median-split tree is at most log2(triangles) deep): each box's distance is computed once.
+  struct Stacked {
+    int box;
+    double distance2;
+  };
+  std::array<Stacked, 64> stack;
   int top = 0;
-  stack[top++] = 0;
-  while (top > 0) {
-    const Box& box = boxes_[stack[--top]];
-    const double to_box = box.bounds.squaredExteriorDistance(p);
-    if (to_box > bound) {
-      beyond = std::min(beyond, to_box);
-      continue;
-    }
-    if (box.count > 0) {
+  int current = 0;
+  double current_distance2 = squared_distance(p, boxes_[0].bounds);
+  while (true) {
+    const Box& box = boxes_[current];
+    if (current_distance2 > bound) {
+      beyond = std::min(beyond, current_distance2);
+    } else if (box.count > 0) {
       for (int k = box.first; k < box.first + box.count; ++k) test(order_[k]);
+    } else {
+      const int left = current + 1;
+      const double to_left = squared_distance(p, boxes_[left].bounds);
+      const double to_right = squared_distance(p, boxes_[box.right].bounds);
+      const bool left_first = to_left <= to_right;
+      stack[top++] = left_first ? Stacked{box.right, to_right} : Stacked{left, to_left};
+      current = left_first ? left : box.right;
+      current_distance2 = left_first ? to_left : to_right;
       continue;
     }
-    const int left = static_cast<int>(&box - boxes_.data()) + 1;
-    const double to_left = boxes_[left].bounds.squaredExteriorDistance(p);
-    const double to_right = boxes_[box.right].bounds.squaredExteriorDistance(p);
-    const bool left_first = to_left <= to_right;
-    stack[top++] = left_first ? box.right : left;
-    stack[top++] = left_first ? left : box.right;
+    if (top == 0) break;
+    --top;
+    current = stack[top].box;
+    current_distance2 = stack[top].distance2;
   }
   if (found < 0) {
     best.distance = std::sqrt(beyond);  // every triangle is at least this far
