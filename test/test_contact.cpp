@@ -589,5 +589,59 @@ TEST(Probe, HoveringProbeKeepsModifiedNewtonsFactor) {
   EXPECT_LE((hovered.positions() - free.positions()).cwiseAbs().maxCoeff(), 1e-9 * L);
 }
 
+// Modified Newton judges a factor by the iterations after the one that made it: that one's
+// contraction measures how far from linear the contacts make the problem, which a newer factor
+// meets as well. A probe sweeping 12 mm across the block, one iteration a step: no step
+// refactorises right after one that factorised (none finds no descent here, which would), and
+// the steps track converged dynamics as closely as full Newton's, which refactorises in every
+// iteration. Kills the rule judging the fresh factor too (16 factorisations, 6 of them right
+// after another, against 9 and none; the same error).
+TEST(Probe, AFactorServesTheIterationAfterTheOneThatMadeIt) {
+  const double r = 0.002, depth = 0.001, speed = 0.02;  // m, m, m/s
+  Scene s = block_scene(3000, 0.45, 0.3);
+  InstrumentOptions p = probe("probe", Eigen::Vector3d::Zero(), r);
+  for (double t : {0.0, 0.1, 0.1 + 0.012 / speed}) {  // lowered 2 mm, then swept along x
+    InstrumentOptions::Keyframe f;
+    f.t = t;
+    f.position = Eigen::Vector3d(t <= 0.1 ? 0.004 : 0.016, kBlock / 2, kBlock + r - (t == 0 ? -0.001 : depth));
+    p.trajectory.push_back(f);
+  }
+  s.instruments.push_back(p);
+  s.solver.mode = SolverOptions::Mode::Dynamic;
+  s.solver.dt = 0.01;
+  s.solver.rayleigh_mass = 20;
+  Scene converged = s, modified = s, full = s;
+  converged.solver.strategy = SolverOptions::Strategy::NewtonKrylov;
+  converged.solver.tolerance = 1e-8;
+  converged.solver.max_iterations = 100;
+  modified.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
+  full.solver.strategy = SolverOptions::Strategy::FullNewton;
+  for (Scene* one : {&modified, &full}) {
+    one->solver.max_iterations = 1;
+    one->solver.tolerance = 1e-14;  // every step takes its one iteration
+  }
+  const TetMesh block = make_box_mesh({kBlock, kBlock, kBlock}, {6, 6, 6});
+  LiverModel reference(block, converged), kept(block, modified), refreshed(block, full);
+  int factorizations = 0, right_after = 0;
+  bool factorized_before = false;
+  double kept_error = 0, refreshed_error = 0, contacts = 0;
+  for (int k = 0; k < 80; ++k) {
+    const StepResult c = reference.step(), m = kept.step(), f = refreshed.step();
+    ASSERT_TRUE(c.converged()) << "step " << k << ": " << c.message;
+    ASSERT_NE(m.status, StepResult::Status::Diverged) << "step " << k << ": " << m.message;
+    ASSERT_NE(f.status, StepResult::Status::Diverged) << "step " << k << ": " << f.message;
+    factorizations += m.factorizations;
+    if (m.factorizations > 0 && factorized_before) ++right_after;
+    factorized_before = m.factorizations > 0;
+    contacts += c.contacts;
+    kept_error = std::max(kept_error, (kept.positions() - reference.positions()).cwiseAbs().maxCoeff());
+    refreshed_error = std::max(refreshed_error, (refreshed.positions() - reference.positions()).cwiseAbs().maxCoeff());
+  }
+  ASSERT_GT(contacts, 0) << "the probe never touched the block";
+  ASSERT_GT(factorizations, 1) << "the sweep never asked for a new factor";
+  EXPECT_EQ(right_after, 0);
+  EXPECT_LE(kept_error, 1.01 * refreshed_error);
+}
+
 }  // namespace
 }  // namespace liver_sim
