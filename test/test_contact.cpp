@@ -594,8 +594,8 @@ TEST(Probe, HoveringProbeKeepsModifiedNewtonsFactor) {
 // meets as well. A probe sweeping 12 mm across the block, one iteration a step: no step
 // refactorises right after one that factorised (none finds no descent here, which would), and
 // the steps track converged dynamics as closely as full Newton's, which refactorises in every
-// iteration. Kills the rule judging the fresh factor too (16 factorisations, 6 of them right
-// after another, against 9 and none; the same error).
+// iteration (0.452 against 0.455 of the peak motion). Kills the rule judging the fresh factor
+// too (16 factorisations, 6 of them right after another, against 9 and none; the same error).
 TEST(Probe, AFactorServesTheIterationAfterTheOneThatMadeIt) {
   const double r = 0.002, depth = 0.001, speed = 0.02;  // m, m, m/s
   Scene s = block_scene(3000, 0.45, 0.3);
@@ -624,7 +624,8 @@ TEST(Probe, AFactorServesTheIterationAfterTheOneThatMadeIt) {
   LiverModel reference(block, converged), kept(block, modified), refreshed(block, full);
   int factorizations = 0, right_after = 0;
   bool factorized_before = false;
-  double kept_error = 0, refreshed_error = 0, contacts = 0;
+  int contacts = 0;
+  double kept_error = 0, refreshed_error = 0;
   for (int k = 0; k < 80; ++k) {
     const StepResult c = reference.step(), m = kept.step(), f = refreshed.step();
     ASSERT_TRUE(c.converged()) << "step " << k << ": " << c.message;
