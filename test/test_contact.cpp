@@ -622,9 +622,8 @@ TEST(Probe, AFactorServesTheIterationAfterTheOneThatMadeIt) {
   }
   const TetMesh block = make_box_mesh({kBlock, kBlock, kBlock}, {6, 6, 6});
   LiverModel reference(block, converged), kept(block, modified), refreshed(block, full);
-  int factorizations = 0, right_after = 0;
+  int factorizations = 0, right_after = 0, contacts = 0;
   bool factorized_before = false;
-  int contacts = 0;
   double kept_error = 0, refreshed_error = 0;
   for (int k = 0; k < 80; ++k) {
     const StepResult c = reference.step(), m = kept.step(), f = refreshed.step();
