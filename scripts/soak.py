@@ -10,7 +10,8 @@ jumps 3 cm across the lobe and back (the step stages the move). With the node's 
 (exceptions, allocation failures, NaN, negative pivots): each must be rolled back and counted;
 and every fifth injection holds a step up for 0.3 s, which the node's heartbeat must cover.
 
-Reports: messages sent and handled, RSS of the node at start (after a warm-up) and end, status
+Reports: messages sent and handled, RSS of the node at start (after a warm-up that lasts until it
+stops growing) and end, status
 messages and the largest gap between them (heartbeats included: state "busy", sent while a frame
 has run half a frame and no status went out for one frame), the longest frame (the largest gap
 between the stamps of the loop's own statuses), the node's simulation frames against the frames
@@ -202,6 +203,7 @@ class Soak:
     def __init__(self, duration, points, max_gap):
         self.duration = duration
         self.max_gap = max_gap
+        self.warmup = 0.0         # s, set when the warm-up ends
         self.lock = threading.Lock()
         self.sent = {"poses": 0, "nan_poses": 0, "absurd_poses": 0, "jumps": 0, "clouds": 0, "empty_clouds": 0,
                      "service_calls": 0, "refused_service_calls": 0, "resets": 0, "commands": 0, "huge_radii": 0}
@@ -339,8 +341,21 @@ class Soak:
         threads = [threading.Thread(target=f, args=(stop,), daemon=True) for f in (self.poses, self.clouds, self.services)]
         for t in threads:
             t.start()
-        warmup = min(10.0, 0.1 * self.duration)
-        time.sleep(warmup)
+        # Warm-up: the node's memory grows to its working set as the first clouds pass (the
+        # allocator keeps what it frees at its high-water mark: keep_freed_memory, worker_pool.h),
+        # about 60 clouds, which one core takes several seconds to register. The memory check
+        # starts from that plateau: at least min(10 s, a tenth of the run), then until RSS rose
+        # by less than 1 MB in 2 s, at most half the run.
+        warmup_start = time.monotonic()
+        time.sleep(min(10.0, 0.1 * self.duration))
+        rss_before = rss_mb(pid)
+        while time.monotonic() - warmup_start < 0.5 * self.duration:
+            time.sleep(2.0)
+            rss_now = rss_mb(pid)
+            if rss_now - rss_before < 1.0:
+                break
+            rss_before = rss_now
+        warmup = self.warmup = time.monotonic() - warmup_start
         with self.lock:
             rejected_start = self.status[-1][1].rejected_inputs
             faults_start = self.status[-1][1].faults
@@ -415,6 +430,7 @@ class Soak:
         rates = [m.rate for _, m in window if m.rate > 0]
         achieved = float(np.mean(rates)) if rates else 0.0
         r = {
+            "warmup_s": round(self.warmup, 1),
             "duration_s": round(span, 1),
             "node_alive": os.path.exists("/proc/%d" % pid),
             "sent": sent,
