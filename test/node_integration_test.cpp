@@ -252,11 +252,23 @@ TEST_F(Node, MalformedInputIsRefusedAndCountedWhileTheNodeRuns) {
   truncated.data.clear();
   cloud_pub_.publish(truncated);
   ASSERT_TRUE(refused(4)) << "truncated cloud: " << status_.text;
+  // Fields whose offsets wrap a 32-bit sum past point_step (PCL would read 4 GB away), and x
+  // given for all three: refused, and the node lives on.
+  sensor_msgs::PointCloud2 wrapped = xyz_cloud(100, [](int i) { return Eigen::Vector3f::Constant(0.001f * i); });
+  for (size_t k = 0; k < 3; ++k) wrapped.fields[k].offset = 0xFFFFFFFCu + k;
+  cloud_pub_.publish(wrapped);
+  ASSERT_TRUE(refused(5)) << "wrapped offsets: " << status_.text;
+  EXPECT_NE(status_.text.find("within point_step"), std::string::npos) << status_.text;
+  sensor_msgs::PointCloud2 only_x = xyz_cloud(100, [](int i) { return Eigen::Vector3f::Constant(0.001f * i); });
+  for (auto& f : only_x.fields) f.name = "x";
+  cloud_pub_.publish(only_x);
+  ASSERT_TRUE(refused(6)) << "x three times: " << status_.text;
+  EXPECT_NE(status_.text.find("twice"), std::string::npos) << status_.text;
   EXPECT_NEAR(status_.max_displacement, before.max_displacement, 1e-12) << "refused input changed the model";
   EXPECT_EQ(status_.clouds_registered, before.clouds_registered);
   // Ten points on a line are too few to act (registration.min_points): refused.
   cloud_pub_.publish(xyz_cloud(10, [](int i) { return Eigen::Vector3f::Constant(0.001f * i); }));
-  ASSERT_TRUE(refused(5)) << "ten points: " << status_.text;
+  ASSERT_TRUE(refused(7)) << "ten points: " << status_.text;
   EXPECT_NE(status_.text.find("min_points"), std::string::npos) << status_.text;
   EXPECT_EQ(status_.clouds_registered, before.clouds_registered);
   // A cloud of the cube's top face (a sixth of its surface, 100 points 1.5 mm apart) is
@@ -267,7 +279,7 @@ TEST_F(Node, MalformedInputIsRefusedAndCountedWhileTheNodeRuns) {
   ASSERT_TRUE(wait_for([&] { return status_.clouds_registered == before.clouds_registered + 1; }, 10.0)) << status_.text;
   const unsigned count = status_count_;
   ASSERT_TRUE(wait_for([&] { return status_count_ > count + 5; }, 10.0)) << "status stopped flowing";
-  EXPECT_EQ(status_.rejected_inputs, before.rejected_inputs + 5);
+  EXPECT_EQ(status_.rejected_inputs, before.rejected_inputs + 7);
 }
 
 }  // namespace

@@ -482,12 +482,19 @@ class LiverSimNode {
     if (static_cast<uint64_t>(c.point_step) * c.width > c.row_step ||
         static_cast<uint64_t>(c.row_step) * c.height > c.data.size())
       return "data shorter than width, height and steps say";
-    int xyz = 0;
-    for (const auto& f : c.fields)
-      if ((f.name == "x" || f.name == "y" || f.name == "z") && f.datatype == sensor_msgs::PointField::FLOAT32 &&
-          f.offset + 4 <= c.point_step)
-        ++xyz;
-    return xyz == 3 ? "" : "no float32 x, y, z fields";
+    unsigned axes = 0;  // a bit for each of x, y, z met
+    for (const auto& f : c.fields) {
+      const int axis = f.name == "x" ? 0 : f.name == "y" ? 1 : f.name == "z" ? 2 : -1;
+      if (axis < 0) continue;
+      if (axes & (1u << axis)) return "field " + f.name + " given twice";
+      // 64 bits: an offset near 2^32 would wrap past the check and PCL would read outside the data.
+      // A count of 0 is PCL's legacy spelling of 1.
+      if (f.datatype != sensor_msgs::PointField::FLOAT32 || f.count > 1 ||
+          static_cast<uint64_t>(f.offset) + 4 > c.point_step)
+        return "field " + f.name + " is not one float32 within point_step";
+      axes |= 1u << axis;
+    }
+    return axes == 7 ? "" : "no float32 x, y, z fields";
   }
 
   // Clouds are validated, moved into the model frame (tf2, at their stamp), cropped and
