@@ -256,6 +256,33 @@ TEST_F(Reconfigure, StalePosesHoldOrWithdraw) {
   EXPECT_TRUE(wait_for([&] { return !has_tool(); }, 10.0)) << "the held tool withdrawn once holding is off";
 }
 
+// dynamic_reconfigure's clamp lets NaN through, and any string for the strategy: the node
+// refuses them at the next frame (a NaN colour scale would index the colour ramp far out of
+// bounds), counts the refusal, shows the values in force again and keeps publishing.
+TEST_F(Reconfigure, NaNAndUnknownStrategiesAreRefused) {
+  const dynamic_reconfigure::Config before = set({});
+  const unsigned rejected = status_.rejected_inputs;
+  auto told = [](const std::string& what) {  // by a status since the last clear (the next one only says it)
+    return std::any_of(statuses_.begin(), statuses_.end(),
+                       [&](const auto& s) { return s.text.find(what) != std::string::npos; });
+  };
+  statuses_.clear();
+  set({{"color_scale_max", std::nan("")}});
+  ASSERT_TRUE(wait_for([&] { return status_.rejected_inputs == rejected + 1; }, 10.0)) << status_.text;
+  EXPECT_TRUE(told("color_scale_max"));
+  statuses_.clear();
+  set({}, {}, {{"strategy", "no_such_strategy"}});
+  ASSERT_TRUE(wait_for([&] { return status_.rejected_inputs == rejected + 2; }, 10.0)) << status_.text;
+  EXPECT_TRUE(told("unknown strategy"));
+  const dynamic_reconfigure::Config shown = set({});
+  EXPECT_EQ(shown.doubles, before.doubles);
+  EXPECT_EQ(shown.strs, before.strs);
+  const unsigned seen = meshes_;
+  press(0.0075, 0.0075, 0.001);
+  EXPECT_GT(meshes_, seen) << "the mesh is still published";
+  EXPECT_EQ(status_.rejected_inputs, rejected + 2);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {

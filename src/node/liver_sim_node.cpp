@@ -53,6 +53,15 @@ std::string rates_error(double rate, double publish_rate) {
   return "rate must be in [1, 1000] Hz, publish_rate in [0.1, 100] Hz";
 }
 
+// The display and staleness values the node keeps itself (the model checks the rest), checked
+// likewise, with the bounds of cfg/LiverSim.cfg: empty when valid.
+std::string view_error(double color_scale_max, double surface_alpha, double pose_timeout) {
+  if (color_scale_max >= 1e-4 && color_scale_max <= 0.2 && surface_alpha >= 0 && surface_alpha <= 1 &&
+      pose_timeout >= 0 && pose_timeout <= 60)
+    return "";
+  return "color_scale_max must be in [1e-4, 0.2] m, surface_alpha in [0, 1], pose_timeout in [0, 60] s";
+}
+
 std::string scalar_text(const XmlRpc::XmlRpcValue& v) {
   std::ostringstream s;
   s.precision(17);
@@ -86,17 +95,15 @@ class LiverSimNode {
     pnh.param("color_scale_max", color_scale_max_, 0.005);
     pnh.param("surface_alpha", surface_alpha_, 1.0);
     if (const std::string error = rates_error(rate_, publish_rate_); !error.empty()) throw std::invalid_argument("~" + error);
-    if (!(color_scale_max_ > 0)) throw std::invalid_argument("~color_scale_max must be > 0");
     // A step stops at its time budget (SolverOptions::time_budget), one frame by default, so that
     // the loop keeps its rate whatever the solver does.
     double step_time_budget = 1.0 / rate_;
-    pnh.param("step_time_budget", step_time_budget, step_time_budget);
+    budget_follows_rate_ = !pnh.getParam("step_time_budget", step_time_budget);
     if (!(step_time_budget > 0)) throw std::invalid_argument("~step_time_budget must be > 0 s");
     int test_fault_every = 0;
     pnh.param("test_fault_every", test_fault_every, 0);
     if (test_fault_every < 0) throw std::invalid_argument("~test_fault_every must be >= 0");
     guard_.set_test_fault_every(test_fault_every);
-    if (!(surface_alpha_ >= 0 && surface_alpha_ <= 1)) throw std::invalid_argument("~surface_alpha must be in [0, 1]");
     // ~parenchyma/*, ~capsule/*, ~solver/*, ~contact/*, ~registration/* override the scalars of the
     // scene file; ~threads is solver.threads. The node steps in real-time frames by default: modified Newton on a reused
     // factor (contacts carried in the same solve), two iterations a frame, a step that has not
@@ -155,6 +162,8 @@ class LiverSimNode {
     pnh.param("instrument_tf_timeout", instruments.tf_timeout, 0.1);
     pnh.param("pose_timeout", instruments.pose_timeout, 1.0);
     pnh.param("hold_stale_instruments", instruments.hold_stale, false);
+    if (const std::string error = view_error(color_scale_max_, surface_alpha_, instruments.pose_timeout); !error.empty())
+      throw std::invalid_argument("~" + error);
     instruments_ = std::make_unique<RosInstruments>(nh, pnh, tf_buffer_, *model_, instruments,
                                                     [this](const std::string& why) { reject(why); },
                                                     [this](const std::string& what) { warn(what); });
@@ -178,13 +187,23 @@ class LiverSimNode {
     updater_.setHardwareID("liver_sim");
     updater_.add("liver model", this, &LiverSimNode::diagnose);
     // Live tuning: the server starts from the node's values, within the config's bounds (a value
-    // outside them is clamped now, not at the first unrelated change).
+    // outside them is clamped now, and said, not at the first unrelated change).
     pose_timeout_ = instruments.pose_timeout;
     hold_stale_ = instruments.hold_stale;
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<LiverSimConfig>>(reconfigure_mutex_, pnh);
-    LiverSimConfig config = current_config();
-    config.__clamp__();
-    reconfigure_->updateConfig(config);
+    const LiverSimConfig config = current_config();
+    LiverSimConfig clamped = config;
+    clamped.__clamp__();
+    std::ostringstream changed;
+    auto note = [&](const char* name, double from, double to) {
+      if (from != to) changed << (changed.tellp() > 0 ? ", " : "") << name << " " << from << " -> " << to;
+    };
+    note("max_iterations", config.max_iterations, clamped.max_iterations);
+    note("tolerance", config.tolerance, clamped.tolerance);
+    note("friction", config.friction, clamped.friction);
+    note("registration_stiffness", config.registration_stiffness, clamped.registration_stiffness);
+    if (changed.tellp() > 0) warn("clamped to the live-tuning bounds (cfg/LiverSim.cfg): " + changed.str());
+    reconfigure_->updateConfig(clamped);
     reconfigure_->setCallback([this](LiverSimConfig& c, uint32_t) {
       std::lock_guard<std::mutex> lock(mutex_);
       pending_config_ = c;
@@ -358,11 +377,14 @@ class LiverSimNode {
   bool apply_inputs(FrameClock& loop) {
     bool reset = false;
     std::optional<CapsuleOptions> capsule;
+    CapsuleOptions capsule_before;
     std::optional<LiverSimConfig> config;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       std::swap(reset, reset_requested_);
       capsule.swap(pending_capsule_);
+      capsule_before = capsule_;
+      if (capsule) capsule_ = *capsule;  // taken up now: a set_capsule call meanwhile builds on it
       config.swap(pending_config_);
     }
     bool changed = reset || capsule.has_value();
@@ -383,11 +405,14 @@ class LiverSimNode {
     if (capsule) {
       const std::string error = model_->set_capsule(*capsule);  // validated already
       if (error.empty()) {
-        capsule_ = *capsule;
         analysis_->set_capsule(*capsule);
         ++analysis_generation_;  // one running has the old capsule
         analysis_due_ |= clouds_registered_ > 0;
-      } else ROS_ERROR("liver_sim: capsule change failed: %s", error.c_str());
+      } else {
+        ROS_ERROR("liver_sim: capsule change failed: %s", error.c_str());
+        std::lock_guard<std::mutex> lock(mutex_);
+        capsule_ = capsule_before;
+      }
     }
     if (config) changed |= reconfigure(*config, loop);
     if (instruments_->apply(*model_)) {
@@ -417,7 +442,11 @@ class LiverSimNode {
   // A dynamic_reconfigure change (bounded by the config's limits): all of it, or nothing when the
   // model refuses a part (the server then shows the values in force). True when the model changed.
   bool reconfigure(const LiverSimConfig& c, FrameClock& loop) {
-    if (const std::string error = rates_error(c.rate, c.publish_rate); !error.empty()) {
+    const std::optional<SolverOptions::Strategy> strategy = parse_strategy(c.strategy);
+    std::string error = rates_error(c.rate, c.publish_rate);
+    if (error.empty()) error = view_error(c.color_scale_max, c.surface_alpha, c.pose_timeout);
+    if (error.empty() && !strategy) error = "unknown strategy '" + c.strategy + "'";
+    if (!error.empty()) {
       reject("reconfigure: " + error);
       reconfigure_->updateConfig(current_config());
       return false;
@@ -426,12 +455,13 @@ class LiverSimNode {
     const ContactOptions contact_before = model_->contact().options();
     const double stiffness_before = registration_->options().stiffness;
     SolverOptions solver = solver_before;
-    solver.strategy = parse_strategy(c.strategy).value_or(solver.strategy);
+    solver.strategy = *strategy;
     solver.max_iterations = c.max_iterations;
     solver.tolerance = c.tolerance;
+    if (budget_follows_rate_) solver.time_budget = 1.0 / c.rate;
     ContactOptions contact = contact_before;
     contact.friction = c.friction;
-    std::string error = model_->set_solver_options(solver);
+    error = model_->set_solver_options(solver);
     if (error.empty()) error = model_->set_contact_options(contact);
     if (error.empty()) error = registration_->set_stiffness(c.registration_stiffness);
     if (!error.empty()) {
@@ -891,6 +921,7 @@ class LiverSimNode {
   std::string frame_id_;
   double rate_, publish_rate_, color_scale_max_, surface_alpha_;
   double pose_timeout_ = 1.0;  // s, as the instruments have it
+  bool budget_follows_rate_ = true;  // no ~step_time_budget: a step's budget is one frame of ~rate
   bool hold_stale_ = false;
   ros::Publisher mesh_pub_, vessel_pub_, status_pub_, target_marker_pub_, target_pose_pub_;
   ros::Publisher covariance_pub_, ellipsoid_pub_;
@@ -938,7 +969,7 @@ class LiverSimNode {
   bool reset_requested_ = false, align_requested_ = false;
   std::optional<LiverSimConfig> pending_config_;
   std::optional<CapsuleOptions> pending_capsule_;
-  CapsuleOptions capsule_;  // as applied to the model
+  CapsuleOptions capsule_;  // the model's, or the request the simulation thread is applying
   struct PendingCloud {
     pcl::PointCloud<pcl::PointXYZ> points;  // model frame, cropped and downsampled
     std::optional<Eigen::Vector3d> viewpoint;  // the sensor's origin, model frame, when known
