@@ -355,6 +355,41 @@ TEST(Instruments, StalePosesWithdrawAndRemovedStaysOut) {
   EXPECT_EQ(status.rejected_inputs, rejected) << "poses for a removed instrument are not heard, not refused";
 }
 
+// An instrument removed and declared again with the same name and type between two frames (the
+// two commands back to back) takes up its old slot in the model, and stays in the scene: its
+// frame does not move, so no new pose would bring it back (the slot was disabled as retired).
+TEST(Instruments, RemovedAndDeclaredAgainInOneFrameStaysIn) {
+  ros::NodeHandle nh;
+  auto sub = nh.subscribe("liver_sim/status", 100, on_status_with_text);
+  ros::Publisher command = nh.advertise<liver_sim::InstrumentCommand>("instrument_command", 10);
+  ASSERT_TRUE(wait_for([&] { return command.getNumSubscribers() > 0 && status.header.stamp.toSec() > 0; }, 60.0));
+  Tracker tracker;
+  Eigen::Isometry3d held = Eigen::Isometry3d::Identity();
+  held.translation() << 0.0075, 0.0075, kL + 0.01;  // 1 cm above the cube: no contact
+  tracker.set("retractor_frame", held);
+  auto in_scene = [] {
+    return std::count(status.instrument_names.begin(), status.instrument_names.end(), "retractor") == 1;
+  };
+  liver_sim::InstrumentCommand declare;
+  declare.name = "retractor";
+  declare.type = "shaft";
+  declare.frame = "retractor_frame";
+  command.publish(declare);
+  ASSERT_TRUE(wait_for(in_scene, 30.0)) << "declared on its frame";
+  const uint32_t rejected = status.rejected_inputs;
+  liver_sim::InstrumentCommand remove;
+  remove.name = "retractor";
+  remove.remove = true;
+  command.publish(remove);
+  command.publish(declare);
+  const ros::Time sent = ros::Time::now();
+  ASSERT_TRUE(wait_for([&] { return status.header.stamp > sent + ros::Duration(1.0); }, 30.0));
+  EXPECT_TRUE(in_scene()) << "withdrawn after being declared again";
+  EXPECT_EQ(status.rejected_inputs, rejected);
+  command.publish(remove);
+  EXPECT_TRUE(wait_for([&] { return !in_scene(); }, 30.0)) << "removed";
+}
+
 // Poses stamped in a tracker frame that tf updates at 50 Hz: each waits for its transform (up
 // to ~instrument_tf_timeout) instead of being refused as an extrapolation into the future.
 // With ~instrument_tf_timeout 0 every one of them is refused and this test fails.

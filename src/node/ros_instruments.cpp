@@ -1,3 +1,4 @@
+#include <algorithm>
 #include "ros_instruments.h"
 
 #include <geometry_msgs/TransformStamped.h>
@@ -356,6 +357,9 @@ bool RosInstruments::apply(LiverModel& model) {
   for (int i : retired_) {
     InstrumentOptions o = model.instrument(i);
     if (!o.enabled) continue;
+    // Taken up again this frame: removed and declared anew with the same name and type.
+    if (std::any_of(tracked_.begin(), tracked_.end(), [i](const auto& named) { return named.second.index == i; }))
+      continue;
     o.enabled = false;
     model.update_instrument(i, o);
     changed = true;
