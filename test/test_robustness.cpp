@@ -493,6 +493,36 @@ TEST(Bounds, RefusalsChangeNothing) {
 // The farthest pose the bounds allow, 100 m away and back, in single steps: the stage count
 // stays at its cap (the travel over a quarter of the radius is 2e5), the state stays finite and
 // the probe comes back into contact.
+// A wire of 0.1 mm lying 4 mm along the top face (every surface sample within the alarm
+// distance, 0.05 mm apart, is a contact point) is refused at detection: the step throws, the
+// state keeps its bits, and the wire lifted off, the next step converges. Without the bound the
+// step takes its 2,913 contact points, an 8,739 x 8,739 Delassus operator, and 15 s (checked:
+// the test then fails).
+TEST(Bounds, TooManyContactPointsAreRefused) {
+  Scene s = scene_with(Type::Probe);
+  LiverModel m(load_scene_mesh(s), s);
+  for (int k = 0; k < 2; ++k) ASSERT_TRUE(m.step().converged());
+  InstrumentOptions wire;
+  wire.name = "wire";
+  wire.type = Type::Shaft;
+  wire.radius = 1e-4;
+  wire.length = 0.004;
+  wire.orientation = Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY()));  // along x
+  wire.position = Eigen::Vector3d(0.002, 0.0075, 0.015 + 0.5 * wire.radius);
+  const int k = m.add_instrument(wire);
+  const std::vector<double> before = m.observable_state();
+  try {
+    m.step();
+    ADD_FAILURE() << "the step took " << m.contact().contacts().size() << " contact points";
+  } catch (const std::length_error& e) {
+    EXPECT_NE(std::string(e.what()).find("instruments.wire"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(same_bits(m.observable_state(), before));
+  wire.position.z() += 0.005;
+  m.update_instrument(k, wire);
+  EXPECT_TRUE(m.step().converged());
+}
+
 TEST(Bounds, TheFarthestJumpIsStagedWithinTheCap) {
   Scene s = load_scene(source("config/scenes/probe_cube.yaml"));
   s.mesh.box_divisions = Eigen::Vector3i(4, 4, 4);

@@ -323,6 +323,16 @@ bool InstrumentContact::detect(const Eigen::VectorXd& x) {
     std::sort(contacts_next_.begin() + first, contacts_next_.end(), less);
     contacts_next_.erase(std::unique(contacts_next_.begin() + first, contacts_next_.end(), same), contacts_next_.end());
   }
+  // Refused before the Delassus operator is sized for them: the step rolls back and the model
+  // keeps its state until the instrument moves or changes.
+  if (contacts_next_.size() > static_cast<size_t>(kMaxContacts)) {
+    std::vector<int> per_instrument(num_instruments(), 0);
+    for (const Contact& c : contacts_next_) ++per_instrument[c.instrument];
+    const int k = static_cast<int>(std::max_element(per_instrument.begin(), per_instrument.end()) - per_instrument.begin());
+    throw std::length_error("instruments." + instruments_[k].options.name + ": " +
+                            std::to_string(contacts_next_.size()) + " contact points, at most " +
+                            std::to_string(kMaxContacts) + " (a thin instrument lying along the surface)");
+  }
   bool dropped_force = false;
   size_t j = 0;
   for (Contact& c : contacts_next_) {
