@@ -390,6 +390,43 @@ TEST(Instruments, RemovedAndDeclaredAgainInOneFrameStaysIn) {
   EXPECT_TRUE(wait_for([&] { return !in_scene(); }, 30.0)) << "removed";
 }
 
+// Seventeen instruments, one after another, each declared, posed, and removed: more names than
+// the model has slots (16) over the node's life, never more than two at once. Each is taken
+// into the scene and none is refused: a new one takes the slot of one withdrawn. With slots kept
+// for every name ever declared, the fifteenth and later were refused at every frame.
+TEST(Instruments, SlotsOfRemovedInstrumentsAreTakenAgain) {
+  ros::NodeHandle nh;
+  auto sub = nh.subscribe("liver_sim/status", 100, on_status_with_text);
+  ros::Publisher command = nh.advertise<liver_sim::InstrumentCommand>("instrument_command", 10);
+  ASSERT_TRUE(wait_for([&] { return command.getNumSubscribers() > 0 && status.header.stamp.toSec() > 0; }, 60.0));
+  const uint32_t rejected = status.rejected_inputs;
+  for (int k = 0; k < liver_sim::kMaxInstruments + 1; ++k) {
+    const std::string name = "probe" + std::to_string(k);
+    auto in_scene = [&] {
+      return std::count(status.instrument_names.begin(), status.instrument_names.end(), name) == 1;
+    };
+    liver_sim::InstrumentCommand c;
+    c.name = name;
+    c.type = k % 2 ? "probe" : "shaft";  // a slot of the other type is taken too
+    command.publish(c);
+    ros::Publisher pose_pub = nh.advertise<geometry_msgs::PoseStamped>("instruments/" + name + "/pose", 1, true);
+    geometry_msgs::PoseStamped pose;
+    pose.header.frame_id = "liver";
+    pose.header.stamp = ros::Time::now();
+    pose.pose.position.x = pose.pose.position.y = 0.0075;
+    pose.pose.position.z = kL + 0.01;  // 1 cm above the cube
+    pose.pose.orientation.w = 1;
+    pose_pub.publish(pose);  // latched: heard once the node subscribes
+    ASSERT_TRUE(wait_for(in_scene, 30.0)) << name << ": " << status.text;
+    c = liver_sim::InstrumentCommand();
+    c.name = name;
+    c.remove = true;
+    command.publish(c);
+    ASSERT_TRUE(wait_for([&] { return !in_scene(); }, 30.0)) << name << " removed";
+  }
+  EXPECT_EQ(status.rejected_inputs, rejected) << status.text;
+}
+
 // Poses stamped in a tracker frame that tf updates at 50 Hz: each waits for its transform (up
 // to ~instrument_tf_timeout) instead of being refused as an extrapolation into the future.
 // With ~instrument_tf_timeout 0 every one of them is refused and this test fails.

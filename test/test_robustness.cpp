@@ -523,6 +523,40 @@ TEST(Bounds, TooManyContactPointsAreRefused) {
   EXPECT_TRUE(m.step().converged());
 }
 
+// A model full of instruments takes a new one in the slot of one withdrawn since the last step,
+// name and type included (a tube where the probe was: it then gets a pressure load), and
+// refuses to replace one in the scene; the new one acts. Without replace_instrument a node
+// that saw 16 names, each declared and removed, refused every new one.
+TEST(Bounds, AWithdrawnInstrumentsSlotTakesANewOne) {
+  Scene s = scene_with(Type::Probe);
+  LiverModel m(load_scene_mesh(s), s);
+  for (int k = 0; k < 2; ++k) ASSERT_TRUE(m.step().converged());
+  ASSERT_GT(m.instrument_reaction(0).contacts, 0);
+  for (int i = m.num_instruments(); i < kMaxInstruments; ++i) {
+    InstrumentOptions far;
+    far.name = "far" + std::to_string(i);
+    far.enabled = false;
+    m.add_instrument(far);
+  }
+  InstrumentOptions tube = scene_with(Type::Tube).instruments[0];
+  tube.name = "tube";
+  tube.trajectory.clear();
+  tube.position = Eigen::Vector3d(0.0075, 0.0075, 0.015);  // on the top face's centre
+  EXPECT_THROW(m.replace_instrument(0, tube), std::invalid_argument) << "the probe is in the scene";
+  InstrumentOptions probe = m.instrument(0);
+  probe.enabled = false;
+  m.update_instrument(0, probe);
+  EXPECT_THROW(m.replace_instrument(0, tube), std::invalid_argument) << "in the scene at the last step";
+  ASSERT_TRUE(m.step().converged());
+  EXPECT_EQ(m.instrument_reaction(0).contacts, 0);
+  m.replace_instrument(0, tube);
+  EXPECT_EQ(m.num_instruments(), kMaxInstruments);
+  EXPECT_EQ(m.find_instrument("tube"), 0);
+  EXPECT_EQ(m.find_instrument(probe.name), -1);
+  for (int k = 0; k < 3; ++k) ASSERT_NE(m.step().status, StepResult::Status::Diverged);
+  EXPECT_GT(m.instrument_reaction(0).contacts, 0) << "the tube acts";
+}
+
 TEST(Bounds, TheFarthestJumpIsStagedWithinTheCap) {
   Scene s = load_scene(source("config/scenes/probe_cube.yaml"));
   s.mesh.box_divisions = Eigen::Vector3i(4, 4, 4);

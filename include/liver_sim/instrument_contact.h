@@ -61,7 +61,13 @@ class InstrumentContact {
   // acts at the next step. `time` places an instrument with a trajectory.
   int add_instrument(const InstrumentOptions& o, double time);
   void update_instrument(int i, const InstrumentOptions& o);
+  // Slot i, out of the scene (disabled) since the last step, becomes a new instrument, name and
+  // type included, as add_instrument makes it: a model full of withdrawn instruments takes new
+  // ones. Throws std::invalid_argument as add_instrument does, or when slot i is in the scene.
+  void replace_instrument(int i, const InstrumentOptions& o, double time);
   int num_instruments() const { return static_cast<int>(instruments_.size()); }
+  // Out of the scene (disabled) and out of it at the last step: replace_instrument takes it.
+  bool withdrawn(int i) const { return !instruments_[i].options.enabled && !instruments_[i].was_enabled; }
   const InstrumentOptions& instrument(int i) const { return instruments_[i].options; }
   int find_instrument(const std::string& name) const;  // -1 when there is none
   const Eigen::Isometry3d& pose(int i) const { return instruments_[i].pose; }  // at the last step
@@ -171,6 +177,8 @@ class InstrumentContact {
   // Normal gap and tangential slips (bilateral: position error) of contact c at x (m), and
   // its frame (columns: normal, tangents).
   Eigen::Vector3d contact_rows(const Contact& c, const Eigen::VectorXd& x, Eigen::Matrix3d* frame) const;
+  // A new instrument of options o in slot `in`, posed at `time`; a tube gets a pressure load.
+  void place(Instrument& in, const InstrumentOptions& o, double time);
   // Instrument k's size: the length a stage may travel is a quarter of it.
   static double size(const InstrumentOptions& o);
   // The triangles that may come within `reach` of an instrument of shape o at pose at x, by a

@@ -56,7 +56,9 @@ class LiverModel {
   // Instruments (InstrumentContact); the scene's are added by the constructor.
   int add_instrument(const InstrumentOptions& o) { return contact_.add_instrument(o, stepper_.time()); }
   void update_instrument(int i, const InstrumentOptions& o) { contact_.update_instrument(i, o); }
+  void replace_instrument(int i, const InstrumentOptions& o) { contact_.replace_instrument(i, o, stepper_.time()); }
   int num_instruments() const { return contact_.num_instruments(); }
+  bool instrument_withdrawn(int i) const { return contact_.withdrawn(i); }
   const InstrumentOptions& instrument(int i) const { return contact_.instrument(i); }
   int find_instrument(const std::string& name) const { return contact_.find_instrument(name); }
   const InstrumentReaction& instrument_reaction(int i) const { return contact_.reaction(i); }

@@ -66,12 +66,30 @@ int InstrumentContact::add_instrument(const InstrumentOptions& o, double time) {
   if (num_instruments() >= kMaxInstruments)
     throw std::invalid_argument("instruments." + o.name + ": at most " + std::to_string(kMaxInstruments) +
                                 " instruments in a model");
-  Instrument in;
+  instruments_.emplace_back();
+  place(instruments_.back(), o, time);
+  return num_instruments() - 1;
+}
+
+void InstrumentContact::replace_instrument(int i, const InstrumentOptions& o, double time) {
+  require_valid(validate(o));
+  const int named = find_instrument(o.name);
+  if (named >= 0 && named != i) throw std::invalid_argument("instruments." + o.name + ": the name is taken");
+  if (!withdrawn(i)) throw std::invalid_argument("instruments." + instruments_.at(i).options.name + ": in the scene, not replaced");
+  Instrument& in = instruments_[i];
+  // Out of the scene since the last step: no contact of it carries force, none is kept.
+  contacts_.erase(std::remove_if(contacts_.begin(), contacts_.end(), [i](const Contact& c) { return c.instrument == i; }),
+                  contacts_.end());
+  const int suction_load = in.suction_load;  // a former tube's load stays with the slot (no pressure without suction)
+  in = Instrument();
+  in.suction_load = suction_load;
+  place(in, o, time);
+}
+
+void InstrumentContact::place(Instrument& in, const InstrumentOptions& o, double time) {
   in.options = o;
   in.pose = in.pose_start = pose_at(o, time);
-  if (o.type == InstrumentOptions::Type::Tube) in.suction_load = mechanics_.add_pressure_load();
-  instruments_.push_back(std::move(in));
-  return num_instruments() - 1;
+  if (o.type == InstrumentOptions::Type::Tube && in.suction_load < 0) in.suction_load = mechanics_.add_pressure_load();
 }
 
 void InstrumentContact::update_instrument(int i, const InstrumentOptions& o) {

@@ -287,6 +287,17 @@ void RosInstruments::lookup_frame(const std::string& name, Tracked& t) {
   }
 }
 
+int RosInstruments::free_slot(const LiverModel& model) const {
+  bool freed_now = false;
+  for (int i = 0; i < model.num_instruments(); ++i) {
+    if (std::any_of(tracked_.begin(), tracked_.end(), [i](const auto& named) { return named.second.index == i; }))
+      continue;
+    if (model.instrument_withdrawn(i)) return i;
+    freed_now = true;
+  }
+  return freed_now ? kFreeNextFrame : -1;
+}
+
 int RosInstruments::model_slot(LiverModel& model, const InstrumentOptions& shape) {
   const int own = model.find_instrument(shape.name);
   if (own >= 0 && model.instrument(own).type == shape.type) return own;
@@ -338,7 +349,17 @@ bool RosInstruments::apply(LiverModel& model) {
       int slot = model_slot(model, o);
       if (slot < 0) {
         if (model.find_instrument(o.name) >= 0) o.name += std::string(".") + type_name(o.type);
-        slot = model.add_instrument(o);
+        const int free = model.num_instruments() < kMaxInstruments ? -1 : free_slot(model);
+        if (free == kFreeNextFrame) {  // one withdrawn this frame: free at the next
+          ++it;
+          continue;
+        }
+        if (free >= 0) {
+          model.replace_instrument(free, o);
+          slot = free;
+        } else {
+          slot = model.add_instrument(o);
+        }
       } else {
         o.name = model.instrument(slot).name;
         model.update_instrument(slot, o);
