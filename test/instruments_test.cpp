@@ -392,8 +392,9 @@ TEST(Instruments, RemovedAndDeclaredAgainInOneFrameStaysIn) {
 
 // Seventeen instruments, one after another, each declared, posed, and removed: more names than
 // the model has slots (16) over the node's life, never more than two at once. Each is taken
-// into the scene and none is refused: a new one takes the slot of one withdrawn. With slots kept
-// for every name ever declared, the fifteenth and later were refused at every frame.
+// into the scene and none is refused: a new one takes the slot of one withdrawn. With a slot
+// kept for every name ever declared, the first name past the model's 16 slots (probe12 after
+// this suite's earlier tests) was refused at every frame (checked).
 TEST(Instruments, SlotsOfRemovedInstrumentsAreTakenAgain) {
   ros::NodeHandle nh;
   auto sub = nh.subscribe("liver_sim/status", 100, on_status_with_text);

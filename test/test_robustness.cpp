@@ -490,9 +490,6 @@ TEST(Bounds, RefusalsChangeNothing) {
   EXPECT_TRUE(m.step().converged());
 }
 
-// The farthest pose the bounds allow, 100 m away and back, in single steps: the stage count
-// stays at its cap (the travel over a quarter of the radius is 2e5), the state stays finite and
-// the probe comes back into contact.
 // A wire of 0.1 mm lying 4 mm along the top face (every surface sample within the alarm
 // distance, 0.05 mm apart, is a contact point) is refused at detection: the step throws, the
 // state keeps its bits, and the wire lifted off, the next step converges. Without the bound the
@@ -557,6 +554,9 @@ TEST(Bounds, AWithdrawnInstrumentsSlotTakesANewOne) {
   EXPECT_GT(m.instrument_reaction(0).contacts, 0) << "the tube acts";
 }
 
+// The farthest pose the bounds allow, 100 m away and back, in single steps: the stage count
+// stays at its cap (the travel over a quarter of the radius is 2e5), the state stays finite and
+// the probe comes back into contact.
 TEST(Bounds, TheFarthestJumpIsStagedWithinTheCap) {
   Scene s = load_scene(source("config/scenes/probe_cube.yaml"));
   s.mesh.box_divisions = Eigen::Vector3i(4, 4, 4);

@@ -61,9 +61,9 @@ class InstrumentContact {
   // acts at the next step. `time` places an instrument with a trajectory.
   int add_instrument(const InstrumentOptions& o, double time);
   void update_instrument(int i, const InstrumentOptions& o);
-  // Slot i, out of the scene (disabled) since the last step, becomes a new instrument, name and
-  // type included, as add_instrument makes it: a model full of withdrawn instruments takes new
-  // ones. Throws std::invalid_argument as add_instrument does, or when slot i is in the scene.
+  // Slot i, out of the scene now and at the last step, becomes a new instrument, name and type
+  // included, as add_instrument makes it: a model full of withdrawn instruments takes new ones.
+  // Throws std::invalid_argument as add_instrument does, or when slot i is or was in the scene.
   void replace_instrument(int i, const InstrumentOptions& o, double time);
   int num_instruments() const { return static_cast<int>(instruments_.size()); }
   // Out of the scene (disabled) and out of it at the last step: replace_instrument takes it.

@@ -155,10 +155,11 @@ struct InstrumentOptions {
 };
 
 constexpr int kMaxInstruments = 16;  // instruments in one model (InstrumentContact::add_instrument)
-// Contact points in one detection (InstrumentContact::detect): the Delassus operator of m points
-// is a dense 3m x 3m matrix filled in O(m^2), 72 MB at this bound. A 5 mm rod lying 10 cm along
-// the surface makes about 300; a wire of 0.2 mm lying 5 cm along it, some 10,000.
-constexpr int kMaxContacts = 1000;
+// Contact points of all instruments in one detection (InstrumentContact::detect): the Delassus
+// operator of m points is a dense 3m x 3m matrix filled in O(m^2), 288 MB at this bound. The
+// aspiration tube pressing its cube makes 16; a wire of 0.1 mm lying 4 mm along the probe cube's
+// face, 2,913.
+constexpr int kMaxContacts = 2000;
 
 // The contact solver (projected Gauss-Seidel on the Delassus operator, contact.h).
 struct ContactOptions {

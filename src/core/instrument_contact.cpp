@@ -75,12 +75,10 @@ void InstrumentContact::replace_instrument(int i, const InstrumentOptions& o, do
   require_valid(validate(o));
   const int named = find_instrument(o.name);
   if (named >= 0 && named != i) throw std::invalid_argument("instruments." + o.name + ": the name is taken");
-  if (!withdrawn(i)) throw std::invalid_argument("instruments." + instruments_.at(i).options.name + ": in the scene, not replaced");
-  Instrument& in = instruments_[i];
-  // Out of the scene since the last step: no contact of it carries force, none is kept.
-  contacts_.erase(std::remove_if(contacts_.begin(), contacts_.end(), [i](const Contact& c) { return c.instrument == i; }),
-                  contacts_.end());
-  const int suction_load = in.suction_load;  // a former tube's load stays with the slot (no pressure without suction)
+  Instrument& in = instruments_.at(i);
+  // Out of the scene at the last step: the detection kept no contact of it.
+  if (!withdrawn(i)) throw std::invalid_argument("instruments." + in.options.name + ": in the scene, not replaced");
+  const int suction_load = in.suction_load;  // a former tube's load stays with the slot (begin_step: no pressure unless a tube)
   in = Instrument();
   in.suction_load = suction_load;
   place(in, o, time);
@@ -268,9 +266,10 @@ int InstrumentContact::begin_step(double t, const Eigen::VectorXd& x) {
     if (in.suction_load >= 0) {
       // Suction acts on the surface inside the lumen as the step starts.
       PressureLoad& load = mechanics_.pressure_load(in.suction_load);
-      load.pressure = -o.suction;
+      const bool tube = o.type == InstrumentOptions::Type::Tube;  // a slot that held a tube keeps its load
+      load.pressure = tube ? -o.suction : 0.0;
       load.triangles.clear();
-      if (!o.enabled || o.suction == 0) continue;
+      if (!o.enabled || load.pressure == 0) continue;
       for (int f = 0; f < boundary.rows(); ++f) {
         const Eigen::Vector3d a = x.segment<3>(3 * boundary(f, 0)), b = x.segment<3>(3 * boundary(f, 1)),
                               c = x.segment<3>(3 * boundary(f, 2));
@@ -342,14 +341,14 @@ bool InstrumentContact::detect(const Eigen::VectorXd& x) {
     contacts_next_.erase(std::unique(contacts_next_.begin() + first, contacts_next_.end(), same), contacts_next_.end());
   }
   // Refused before the Delassus operator is sized for them: the step rolls back and the model
-  // keeps its state until the instrument moves or changes.
+  // keeps its state until the instruments move or change.
   if (contacts_next_.size() > static_cast<size_t>(kMaxContacts)) {
     std::vector<int> per_instrument(num_instruments(), 0);
     for (const Contact& c : contacts_next_) ++per_instrument[c.instrument];
     const int k = static_cast<int>(std::max_element(per_instrument.begin(), per_instrument.end()) - per_instrument.begin());
-    throw std::length_error("instruments." + instruments_[k].options.name + ": " +
-                            std::to_string(contacts_next_.size()) + " contact points, at most " +
-                            std::to_string(kMaxContacts) + " (a thin instrument lying along the surface)");
+    throw std::length_error(std::to_string(contacts_next_.size()) + " contact points, at most " +
+                            std::to_string(kMaxContacts) + " of all instruments (the most: instruments." +
+                            instruments_[k].options.name + ", " + std::to_string(per_instrument[k]) + ")");
   }
   bool dropped_force = false;
   size_t j = 0;

@@ -54,12 +54,18 @@ std::string rates_error(double rate, double publish_rate) {
 }
 
 // The display and staleness values the node keeps itself (the model checks the rest), checked
-// likewise, with the bounds of cfg/LiverSim.cfg: empty when valid.
+// likewise against the bounds of cfg/LiverSim.cfg: empty when valid.
 std::string view_error(double color_scale_max, double surface_alpha, double pose_timeout) {
-  if (color_scale_max >= 1e-4 && color_scale_max <= 0.2 && surface_alpha >= 0 && surface_alpha <= 1 &&
-      pose_timeout >= 0 && pose_timeout <= 60)
-    return "";
-  return "color_scale_max must be in [1e-4, 0.2] m, surface_alpha in [0, 1], pose_timeout in [0, 60] s";
+  const LiverSimConfig& low = LiverSimConfig::__getMin__();
+  const LiverSimConfig& high = LiverSimConfig::__getMax__();
+  std::ostringstream error;
+  auto check = [&](const char* name, double v, double lo, double hi, const char* unit) {
+    if (error.tellp() == 0 && !(v >= lo && v <= hi)) error << name << " must be in [" << lo << ", " << hi << "]" << unit << " (got " << v << ")";
+  };
+  check("color_scale_max", color_scale_max, low.color_scale_max, high.color_scale_max, " m");
+  check("surface_alpha", surface_alpha, low.surface_alpha, high.surface_alpha, "");
+  check("pose_timeout", pose_timeout, low.pose_timeout, high.pose_timeout, " s");
+  return error.str();
 }
 
 std::string scalar_text(const XmlRpc::XmlRpcValue& v) {
@@ -98,7 +104,7 @@ class LiverSimNode {
     // A step stops at its time budget (SolverOptions::time_budget), one frame by default, so that
     // the loop keeps its rate whatever the solver does.
     double step_time_budget = 1.0 / rate_;
-    budget_follows_rate_ = !pnh.getParam("step_time_budget", step_time_budget);
+    budget_follows_rate_ = !pnh.getParam("step_time_budget", step_time_budget) && !pnh.hasParam("solver/time_budget");
     if (!(step_time_budget > 0)) throw std::invalid_argument("~step_time_budget must be > 0 s");
     int test_fault_every = 0;
     pnh.param("test_fault_every", test_fault_every, 0);
@@ -921,7 +927,7 @@ class LiverSimNode {
   std::string frame_id_;
   double rate_, publish_rate_, color_scale_max_, surface_alpha_;
   double pose_timeout_ = 1.0;  // s, as the instruments have it
-  bool budget_follows_rate_ = true;  // no ~step_time_budget: a step's budget is one frame of ~rate
+  bool budget_follows_rate_ = true;  // neither ~step_time_budget nor ~solver/time_budget: one frame of ~rate
   bool hold_stale_ = false;
   ros::Publisher mesh_pub_, vessel_pub_, status_pub_, target_marker_pub_, target_pose_pub_;
   ros::Publisher covariance_pub_, ellipsoid_pub_;

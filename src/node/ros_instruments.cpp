@@ -350,7 +350,8 @@ bool RosInstruments::apply(LiverModel& model) {
       if (slot < 0) {
         if (model.find_instrument(o.name) >= 0) o.name += std::string(".") + type_name(o.type);
         const int free = model.num_instruments() < kMaxInstruments ? -1 : free_slot(model);
-        if (free == kFreeNextFrame) {  // one withdrawn this frame: free at the next
+        if (free == kFreeNextFrame) {  // out of the scene once a step has run without it
+          changed = true;
           ++it;
           continue;
         }

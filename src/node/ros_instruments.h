@@ -83,9 +83,9 @@ class RosInstruments {
   // The model's instrument for `shape`: the one of its name, or of its name and type when it
   // once had another type (the model keeps an instrument's type for life).
   static int model_slot(LiverModel& model, const InstrumentOptions& shape);
-  // A model instrument no tracked one uses and out of the scene since the last step, for a new
-  // one when the model is full; kFreeNextFrame when the only unused ones left the scene this
-  // frame; -1 when there is none (mutex held).
+  // A model instrument no tracked one uses and out of the scene at the last step, for a new one
+  // when the model is full; kFreeNextFrame when the unused ones were still in the scene at the
+  // last step (free once a step has run without them); -1 when there is none (mutex held).
   static constexpr int kFreeNextFrame = -2;
   int free_slot(const LiverModel& model) const;
   void lookup_frame(const std::string& name, Tracked& t);  // mutex held
