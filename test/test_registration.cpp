@@ -433,13 +433,15 @@ TEST(PhantomRegistration, PointsBeyondTheGateAreFoundOnceTheSurfaceComesNear) {
   }
   EXPECT_GT(within_gate(model.positions()), inliers + 10);  // the surface came near some far points
   // A cloud of as many points, all deep inside the lobe (beyond the gate), is refused; the fit
-  // of all points is the last accepted cloud's again, whatever this one's search left. Killed
-  // by hits kept as those of the accepted points (tried).
+  // of all points is the last accepted cloud's again, from that cloud's hits, whatever this
+  // one's search left. Killed by the refused cloud's hits kept (tried).
   pcl::PointCloud<pcl::PointXYZ> deep;
   for (size_t k = 0; k < used.size(); ++k) deep.push_back(pcl::PointXYZ(-0.05, -0.02, 0.005 + 1e-6 * k));
   EXPECT_THROW(registration.register_cloud(deep), std::invalid_argument);
   f = registration.refine();
-  EXPECT_NEAR(f.rms_all, fit_of_all(), 1e-12);
+  const double moved = (model.positions() - searched_at).reshaped(3, model.positions().size() / 3).colwise().norm().maxCoeff();
+  EXPECT_GE(f.rms_all, fit_of_all() - 1e-12);
+  EXPECT_LE(f.rms_all, fit_of_all() + 2 * moved + 1e-12);
 }
 
 TEST(PhantomRegistration, RecoversALiftFromNoisyPartialClouds) {
@@ -542,6 +544,54 @@ TEST(PhantomRegistration, RefusesCloudsWithNothingToRegisterAndKeepsItsState) {
   RegistrationOptions bad = p.scene.registration;
   bad.trim_fraction = 0.95;
   EXPECT_THROW(SurfaceRegistration(*p.model, bad), std::invalid_argument);
+}
+
+TEST(PhantomRegistration, AStepThatThrowsTakesItsUpdateBack) {
+  // A model step that throws during a registration (an injected fault; NewtonStepper rolls the
+  // state back) takes its update's springs back with it. Checked against a twin that never met
+  // the fault: after a cloud whose first solve threw, the twin has not seen the cloud; after a
+  // refine() whose update threw, the twin has not made that update. Both then go on alike, to
+  // the last bit. Killed by leaving out the springs' restore in accept_update (tried: the failed
+  // cloud's springs stay and the next refine() pulls towards it) and by register_cloud keeping
+  // the failed cloud's points (tried: refine() searches the new points).
+  Phantom a(5.0), b(5.0);
+  RegistrationOptions o = a.scene.registration;
+  o.frame_updates = 1;
+  SurfaceRegistration faulty(*a.model, o), twin(*b.model, o);
+  auto cloud = [&](unsigned seed) {
+    const CameraView v = a.view(1e-3, 0.0, seed);
+    return std::make_pair(render_surface_cloud(a.truth->positions(), a.model->boundary(), v).cloud, v.eye);
+  };
+  auto same = [&](const char* when) {
+    SCOPED_TRACE(when);
+    EXPECT_EQ(a.model->positions(), b.model->positions());
+    ASSERT_EQ(faulty.cloud_springs().size(), twin.cloud_springs().size());
+    for (size_t i = 0; i < twin.cloud_springs().size(); ++i) {
+      EXPECT_EQ(faulty.cloud_springs()[i].point, twin.cloud_springs()[i].point);
+      EXPECT_EQ(faulty.cloud_springs()[i].triangle, twin.cloud_springs()[i].triangle);
+    }
+    EXPECT_EQ(a.model->surface_targets().size(), b.model->surface_targets().size());
+  };
+  const auto first = cloud(3), second = cloud(4);
+  faulty.register_cloud(first.first, first.second);
+  twin.register_cloud(first.first, first.second);
+  a.model->stepper().inject_fault(NewtonStepper::InjectedFault::Exception);
+  EXPECT_THROW(faulty.register_cloud(second.first, second.second), std::runtime_error);
+  same("after a cloud whose first solve threw");
+  faulty.refine();
+  twin.refine();
+  same("refined on the first cloud");
+
+  faulty.register_cloud(second.first, second.second);
+  twin.register_cloud(second.first, second.second);
+  ASSERT_TRUE(twin.updates_pending());
+  a.model->stepper().inject_fault(NewtonStepper::InjectedFault::Exception);
+  EXPECT_THROW(faulty.refine(), std::runtime_error);
+  same("after a refine() whose update threw");
+  const RegistrationFrame f = faulty.refine(), g = twin.refine();
+  same("the update made again");
+  EXPECT_EQ(f.correspondences, g.correspondences);
+  EXPECT_EQ(f.coverage, g.coverage);
 }
 
 TEST(PhantomRegistration, HugeCloudIsCroppedAndDownsampled) {

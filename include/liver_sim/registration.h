@@ -97,7 +97,10 @@ class SurfaceRegistration {
   // remains, none lies within max_distance of the model's bounding box or of its surface, no
   // triangle faces the viewpoint, fewer than min_points are accepted, or they cover less than
   // min_coverage of the surface. The springs share stiffness x min(1, coverage / full_coverage):
-  // a small patch pulls no harder per area than a full view.
+  // a small patch pulls no harder per area than a full view. A model step that throws (rolled
+  // back) takes its update's springs with it and the exception goes on: thrown by the cloud's
+  // first solve, nothing changed, as for a refusal; by a later one, the cloud stands with the
+  // springs of its last update that stepped, as does refine()'s.
   RegistrationFrame register_cloud(const pcl::PointCloud<pcl::PointXYZ>& cloud,
                                    const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
 
@@ -237,8 +240,11 @@ class SurfaceRegistration {
   double all_points_rms();
   // One model step with the registration's strategy and iteration cap; adds to the frame.
   void solve(RegistrationFrame& frame);
-  // The last update's `found` correspondences become the cloud's springs, and are solved.
+  // The last update's `found` correspondences become the cloud's springs, and are solved. A
+  // solve that throws (its step rolled back) takes the springs back to those before it.
   void accept_update(int found, RegistrationFrame& frame);
+  // A registered cloud's frame, completed (rms) and kept as the last.
+  void finish(RegistrationFrame& frame, std::chrono::steady_clock::time_point start);
   // Up to `count` more correspondence updates of the current cloud (of options.
   // correspondence_updates), each followed by a solve (counted in frame.updates).
   void continue_updates(int count, RegistrationFrame& frame);
@@ -250,9 +256,9 @@ class SurfaceRegistration {
   bool align_requested_ = false;
   pcl::PointCloud<pcl::PointXYZ>::Ptr points_, previous_points_;  // this frame's, the last accepted frame's while filtering
   std::vector<SurfaceTarget> targets_;  // of the last update
-  SurfaceLocator locator_;
-  std::vector<SurfaceLocator::Hit> hits_;  // of points_, at the positions searched_at_
-  Eigen::VectorXd searched_at_;            // empty: hits_ are not of points_
+  SurfaceLocator locator_, previous_locator_;  // this cloud's, the last accepted cloud's while registering
+  std::vector<SurfaceLocator::Hit> hits_, previous_hits_;  // of points_, at the positions searched_at_
+  Eigen::VectorXd searched_at_, previous_searched_at_;     // empty: hits_ are not of points_
   std::optional<Eigen::Vector3d> viewpoint_;  // of the last accepted cloud (model frame)
   std::vector<std::pair<double, int>> ranked_;
   std::vector<char> covered_;  // per boundary triangle: holds an accepted point

@@ -621,56 +621,74 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   const auto t_frame = frame_start_ = Clock::now();
   RegistrationFrame frame;
   if (viewpoint && !viewpoint->allFinite()) throw std::invalid_argument("the viewpoint is not finite");
-  // The points of the previous frame stay in use if this cloud is refused (swapped, not copied);
-  // their remaining updates do not (the search state may be this cloud's).
-  updates_left_ = 0;
+  // The points of the previous frame, their hits and their remaining updates stay in use if
+  // this cloud is refused (swapped, not copied).
   points_.swap(previous_points_);
-  searched_at_.resize(0);  // the hits are not of points_ from here on
+  hits_.swap(previous_hits_);
+  searched_at_.swap(previous_searched_at_);
+  searched_at_.resize(0);  // no hits of points_ yet
+  const auto keep_last_cloud = [&] {
+    points_.swap(previous_points_);
+    hits_.swap(previous_hits_);
+    searched_at_.swap(previous_searched_at_);
+  };
   try {
     frame.input_points = filter(cloud);
   } catch (...) {  // a cloud too large, a voxel too fine for its box
-    points_.swap(previous_points_);
+    keep_last_cloud();
     throw;
   }
   if (points_->empty()) {
-    points_.swap(previous_points_);
+    keep_last_cloud();
     throw std::invalid_argument(frame.input_points == 0 ? "the cloud has no finite point"
                                                         : "no point of the cloud lies near the model");
   }
-  // Until the first springs are set, a refusal restores the points and the alignment.
+  // Until the first springs are set, a refusal or a fault (a step that threw and was rolled
+  // back, memory) restores the last cloud, the locator, the viewpoint and the alignment.
   const Eigen::Isometry3d previous_alignment = alignment_;
   const bool was_aligned = aligned_, was_requested = align_requested_;
-  auto refuse = [&](const std::string& why) {
-    points_.swap(previous_points_);
-    // The hits are this cloud's; the locator faces the last accepted cloud's viewpoint again.
-    searched_at_.resize(0);
-    locator_.build(model_.positions(), model_.boundary(), viewpoint_);
+  const std::optional<Eigen::Vector3d> previous_viewpoint = viewpoint_;
+  std::swap(locator_, previous_locator_);
+  try {
+    if ((options_.rigid_alignment && !aligned_) || align_requested_) align_rigidly();
+    frame.used_points = static_cast<int>(points_->size());
+    frame.filter_ms = ms_since(t_frame);
+    const std::optional<Eigen::Vector3d> eye = viewpoint ? std::optional<Eigen::Vector3d>(alignment_ * *viewpoint) : viewpoint;
+    const auto t0 = Clock::now();
+    const int found = find_correspondences(true, eye, frame);
+    frame.correspondence_ms += ms_since(t0);
+    if (found == 0)
+      throw std::invalid_argument(locator_.empty() ? "no surface triangle faces the viewpoint (a sensor inside the liver?)"
+                                                   : "no point of the cloud lies within max_distance of the surface");
+    const std::string why = unsupported(found, frame.coverage);
+    if (!why.empty()) throw std::invalid_argument(why);
+    viewpoint_ = eye;
+    accept_update(found, frame);
+  } catch (...) {
+    keep_last_cloud();
+    std::swap(locator_, previous_locator_);
+    viewpoint_ = previous_viewpoint;
     alignment_ = previous_alignment;
     aligned_ = was_aligned;
     align_requested_ = was_requested;
-    throw std::invalid_argument(why);
-  };
-  if ((options_.rigid_alignment && !aligned_) || align_requested_) align_rigidly();
-  frame.used_points = static_cast<int>(points_->size());
-  frame.filter_ms = ms_since(t_frame);
-  const std::optional<Eigen::Vector3d> eye = viewpoint ? std::optional<Eigen::Vector3d>(alignment_ * *viewpoint) : viewpoint;
-  const auto t0 = Clock::now();
-  const int found = find_correspondences(true, eye, frame);
-  frame.correspondence_ms += ms_since(t0);
-  if (found == 0)
-    refuse(locator_.empty() ? "no surface triangle faces the viewpoint (a sensor inside the liver?)"
-                            : "no point of the cloud lies within max_distance of the surface");
-  const std::string why = unsupported(found, frame.coverage);
-  if (!why.empty()) refuse(why);
-  viewpoint_ = eye;
-  accept_update(found, frame);
-  if (frame.step.status != StepResult::Status::Diverged) updates_left_ = options_.correspondence_updates - 1;
-  continue_updates(options_.frame_updates - 1, frame);
+    throw;
+  }
+  updates_left_ = frame.step.status != StepResult::Status::Diverged ? options_.correspondence_updates - 1 : 0;
+  try {
+    continue_updates(options_.frame_updates - 1, frame);
+  } catch (...) {  // the cloud stands with its last update that stepped
+    finish(frame, t_frame);
+    throw;
+  }
+  finish(frame, t_frame);
+  return frame;
+}
+
+void SurfaceRegistration::finish(RegistrationFrame& frame, Clock::time_point start) {
   frame.rms = spring_rms();
   frame.rms_all = all_points_rms();
-  frame.total_ms = ms_since(t_frame);
+  frame.total_ms = ms_since(start);
   last_ = frame;
-  return frame;
 }
 
 void SurfaceRegistration::solve(RegistrationFrame& frame) {
@@ -714,10 +732,16 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
 }
 
 void SurfaceRegistration::accept_update(int found, RegistrationFrame& frame) {
-  frame.correspondences = found;
   cloud_springs_.swap(targets_);  // targets_ is refilled at the next update
   apply_springs();
-  solve(frame);
+  try {
+    solve(frame);
+  } catch (...) {  // the step that threw was rolled back (NewtonStepper): so are the springs it solved
+    cloud_springs_.swap(targets_);
+    apply_springs();
+    throw;
+  }
+  frame.correspondences = found;
   ++frame.updates;
 }
 
@@ -732,14 +756,22 @@ void SurfaceRegistration::continue_updates(int count, RegistrationFrame& frame) 
     const double coverage = frame.coverage, inlier_fraction = frame.inlier_fraction, scale = frame.stiffness_scale;
     const int found = find_correspondences(false, std::nullopt, frame);
     frame.correspondence_ms += ms_since(t0);
-    if (!unsupported(found, frame.coverage).empty()) {  // the surface moved away from the points: the last springs stay
+    const auto keep_last_springs = [&] {
       frame.coverage = coverage;
       frame.inlier_fraction = inlier_fraction;
       frame.stiffness_scale = scale;
+    };
+    if (!unsupported(found, frame.coverage).empty()) {  // the surface moved away from the points: the last springs stay
+      keep_last_springs();
       updates_left_ = 0;
       return;
     }
-    accept_update(found, frame);
+    try {
+      accept_update(found, frame);
+    } catch (...) {  // the update is left for the next call to try again
+      keep_last_springs();
+      throw;
+    }
     updates_left_ = frame.step.status == StepResult::Status::Diverged ? 0 : updates_left_ - 1;
   }
 }
@@ -754,13 +786,21 @@ RegistrationFrame SurfaceRegistration::refine() {
   frame.coverage = last_.coverage;
   frame.stiffness_scale = last_.stiffness_scale;
   // An update that finds the points no longer supported leaves the springs: they are solved.
-  continue_updates(options_.frame_updates, frame);
-  if (frame.updates > 0) {
+  const auto adopt = [&] {
+    if (frame.updates == 0) return false;
     last_.correspondences = frame.correspondences;
     last_.coverage = frame.coverage;
     last_.inlier_fraction = frame.inlier_fraction;
     last_.stiffness_scale = frame.stiffness_scale;
-  } else {
+    return true;
+  };
+  try {
+    continue_updates(options_.frame_updates, frame);
+  } catch (...) {  // the springs are those of the last update that stepped
+    adopt();
+    throw;
+  }
+  if (!adopt()) {
     solve(frame);
   }
   frame.rms = spring_rms();
