@@ -659,6 +659,12 @@ TEST(PrepareCloud, VoxelCentroidsAreThoseOfPclVoxelGrid) {
   EXPECT_TRUE(voxel_grid_error(voxel, box).empty());
   EXPECT_NE(voxel_grid_error(1e-8, box).find("1048576"), std::string::npos) << voxel_grid_error(1e-8, box);
   EXPECT_THROW(prepare_cloud(cloud, Eigen::Isometry3d::Identity(), box, 1e-8, 1000000, prepared), std::invalid_argument);
+  // So is a subnormal voxel over a box on one side of 0, whose cell indices overflow to
+  // infinity (inf - inf: NaN cells; the grid's hash then never found a free slot). Killed by
+  // the bound tested as "any cells above it" (tried: NaN passes it).
+  const Eigen::AlignedBox3d positive(Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(0.3));
+  EXPECT_FALSE(voxel_grid_error(1e-310, positive).empty());
+  EXPECT_THROW(prepare_cloud(cloud, Eigen::Isometry3d::Identity(), positive, 1e-310, 1000000, prepared), std::invalid_argument);
 }
 
 }  // namespace

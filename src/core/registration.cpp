@@ -318,7 +318,9 @@ Eigen::Array3d voxel_cells(double size, const Eigen::AlignedBox3d& box) {
 }  // namespace
 
 std::string voxel_grid_error(double voxel, const Eigen::AlignedBox3d& box) {
-  if (!(voxel > 0) || !((voxel_cells(voxel, box) > kMaxVoxelsPerAxis).any())) return "";
+  // Negated: a voxel so fine that the box's cell indices overflow to infinity (inf - inf: NaN)
+  // is refused too.
+  if (!(voxel > 0) || (voxel_cells(voxel, box) <= kMaxVoxelsPerAxis).all()) return "";
   std::ostringstream m;
   m << "a voxel of " << voxel << " m is too fine for a box of " << box.sizes().maxCoeff() << " m: at most "
     << kMaxVoxelsPerAxis << " voxels along an axis";
