@@ -379,6 +379,10 @@ TEST(SurfaceMeasures, DeviationOfTiltedSquares) {
   EXPECT_NEAR(d.b_to_a.max, slope, 1e-12);
   EXPECT_NEAR(d.b_to_a.mean, 0.5 * slope, 1e-12);
   EXPECT_NEAR(d.hausdorff(), slope, 1e-12);
+  // A spacing that is not a length, or one that would sample a triangle 1e10 times, and a
+  // surface without triangles are refused.
+  for (double spacing : {0.0, -1.0, std::nan(""), 1e-5}) EXPECT_THROW(surface_deviation(flat, tilted, spacing), std::invalid_argument);
+  EXPECT_THROW(surface_deviation(flat, SurfaceMesh(), 0.05), std::invalid_argument);
 }
 
 // The regular tetrahedron: every dihedral angle acos(1/3), radius ratio 1. The corner of a cube:

@@ -18,7 +18,9 @@ struct OneSidedDeviation {
 // of a triangle (V may hold other points: a tetrahedral mesh's interior nodes),
 // and on each triangle the centroids of its k x k sub-triangles, k = ceil(longest edge / spacing)
 // (each standing for 1/k^2 of the triangle's area, so the means are area-weighted). Distances are
-// exact point-to-triangle distances (SurfaceLocator). Same length unit as the surfaces; spacing > 0.
+// exact point-to-triangle distances (SurfaceLocator). Same length unit as the surfaces. Throws
+// std::invalid_argument unless spacing is finite and > 0, for a surface without triangles, and
+// for k above 1000 (a spacing too fine for the triangles: up to a million samples each).
 struct SurfaceDeviation {
   OneSidedDeviation a_to_b, b_to_a;
   double hausdorff() const { return std::max(a_to_b.max, b_to_a.max); }

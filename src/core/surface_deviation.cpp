@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <vector>
 
 #include "liver_sim/surface_locator.h"
@@ -9,7 +10,11 @@
 namespace liver_sim {
 namespace {
 
+// Sub-triangles per edge at most: a million samples on a triangle.
+constexpr double kMaxDivisions = 1000;
+
 OneSidedDeviation one_sided(const SurfaceMesh& from, const SurfaceMesh& to, double spacing) {
+  if (to.F.rows() == 0) throw std::invalid_argument("surface_deviation: a surface without triangles");
   SurfaceLocator locator;
   const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> node_major = to.V;
   locator.build(Eigen::Map<const Eigen::VectorXd>(node_major.data(), node_major.size()), to.F);
@@ -33,7 +38,11 @@ OneSidedDeviation one_sided(const SurfaceMesh& from, const SurfaceMesh& to, doub
     const Eigen::Vector3d a = from.V.row(from.F(t, 0)), b = from.V.row(from.F(t, 1)), c = from.V.row(from.F(t, 2));
     const double area = 0.5 * (b - a).cross(c - a).norm();
     const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
-    const int k = std::max(1, static_cast<int>(std::ceil(longest / spacing)));
+    const double divisions = std::ceil(longest / spacing);
+    if (!(divisions <= kMaxDivisions))  // NaN included: a non-finite vertex
+      throw std::invalid_argument("surface_deviation: a spacing of " + std::to_string(spacing) +
+                                  " samples a triangle with more than 1000 sub-triangles along an edge");
+    const int k = std::max(1, static_cast<int>(divisions));
     double sum = 0;
     // Centroids of the sub-triangles pointing like the triangle ((i + 1/3)/k, (j + 1/3)/k), then
     // of those pointing the other way ((i + 2/3)/k, (j + 2/3)/k).
@@ -52,6 +61,7 @@ OneSidedDeviation one_sided(const SurfaceMesh& from, const SurfaceMesh& to, doub
 }  // namespace
 
 SurfaceDeviation surface_deviation(const SurfaceMesh& a, const SurfaceMesh& b, double spacing) {
+  if (!(spacing > 0) || !std::isfinite(spacing)) throw std::invalid_argument("surface_deviation: the spacing must be finite and > 0");
   return {one_sided(a, b, spacing), one_sided(b, a, spacing)};
 }
 
