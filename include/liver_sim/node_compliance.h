@@ -19,7 +19,8 @@ class NodeCompliance {
 
   // Every node of `nodes` gets its forward columns and its blocks with the nodes already kept,
   // computed with `factor`; a new factor first empties the cache. When the cache holds more than
-  // twice what is asked (nodes the contacts left), it keeps only these.
+  // twice what is asked (nodes the contacts left), it keeps only these. An exception (memory)
+  // empties the cache.
   void require(const std::vector<int>& nodes, CholmodSolver& factor);
   // G_ab (3 x 3, m/N) for nodes that are kept.
   Eigen::Matrix3d block(int a, int b) const;
@@ -33,6 +34,7 @@ class NodeCompliance {
   int kept() const { return static_cast<int>(nodes_.size()); }
 
  private:
+  void fill(const std::vector<int>& nodes, int missing, CholmodSolver& factor);  // require's work
   void keep_only(const std::vector<int>& nodes);
 
   const CholmodSolver* factor_ = nullptr;

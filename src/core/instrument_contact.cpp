@@ -66,8 +66,9 @@ int InstrumentContact::add_instrument(const InstrumentOptions& o, double time) {
   if (num_instruments() >= kMaxInstruments)
     throw std::invalid_argument("instruments." + o.name + ": at most " + std::to_string(kMaxInstruments) +
                                 " instruments in a model");
-  instruments_.emplace_back();
-  place(instruments_.back(), o, time);
+  Instrument in;  // placed, then listed: a failure (memory) leaves the list as it was
+  place(in, o, time);
+  instruments_.push_back(std::move(in));
   return num_instruments() - 1;
 }
 
@@ -92,9 +93,10 @@ void InstrumentContact::place(Instrument& in, const InstrumentOptions& o, double
 
 void InstrumentContact::update_instrument(int i, const InstrumentOptions& o) {
   require_valid(validate(o));
-  if (o.type != instruments_[i].options.type || o.name != instruments_[i].options.name)
-    throw std::invalid_argument("instruments." + instruments_[i].options.name + ": name and type cannot change");
-  instruments_[i].options = o;
+  Instrument& in = instruments_.at(i);
+  if (o.type != in.options.type || o.name != in.options.name)
+    throw std::invalid_argument("instruments." + in.options.name + ": name and type cannot change");
+  in.options = o;
 }
 
 std::string InstrumentContact::set_options(const ContactOptions& o) {
@@ -418,13 +420,18 @@ void InstrumentContact::contact_problem(CholmodSolver& factor, const Eigen::Vect
   lambda_before_update_.resize(contacts_.size());
   for (size_t c = 0; c < contacts_.size(); ++c) lambda_before_update_[c] = contacts_[c].lambda;
   free_nodes_.clear();
-  for (const Contact& c : contacts_)
-    for (int j = 0; j < c.point.count; ++j) {
-      const int node = c.point.nodes[j];
-      if (mechanics_.fixed_by_scene(node) || node_marked_[node]) continue;
-      node_marked_[node] = 1;
-      free_nodes_.push_back(node);
-    }
+  try {
+    for (const Contact& c : contacts_)
+      for (int j = 0; j < c.point.count; ++j) {
+        const int node = c.point.nodes[j];
+        if (mechanics_.fixed_by_scene(node) || node_marked_[node]) continue;
+        free_nodes_.push_back(node);
+        node_marked_[node] = 1;
+      }
+  } catch (...) {  // memory: no mark may outlive the list (a marked node is never listed again)
+    for (int node : free_nodes_) node_marked_[node] = 0;
+    throw;
+  }
   for (int node : free_nodes_) node_marked_[node] = 0;
   compliance_.require(free_nodes_, factor);
   factor.forward(r, z_);

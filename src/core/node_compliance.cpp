@@ -17,6 +17,18 @@ void NodeCompliance::require(const std::vector<int>& nodes, CholmodSolver& facto
   int missing = 0;
   for (int node : nodes) missing += slot_[node] < 0;
   if (missing == 0) return;
+  try {
+    fill(nodes, missing, factor);
+  } catch (...) {  // memory: a slot may have no columns yet; the cache starts again
+    std::fill(slot_.begin(), slot_.end(), -1);
+    nodes_.clear();
+    columns_of_.clear();
+    factor_ = nullptr;
+    throw;
+  }
+}
+
+void NodeCompliance::fill(const std::vector<int>& nodes, int missing, CholmodSolver& factor) {
   if (kept() + missing > 2 * static_cast<int>(nodes.size()) + 32) keep_only(nodes);
   for (int node : nodes) {
     if (slot_[node] >= 0) continue;
