@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "liver_sim/liver_model.h"
+#include "liver_sim/mesh.h"
 #include "liver_sim/registration.h"
 
 namespace liver_sim {
@@ -518,6 +519,42 @@ TEST(Bounds, TooManyContactPointsAreRefused) {
   wire.position.z() += 0.005;
   m.update_instrument(k, wire);
   EXPECT_TRUE(m.step().converged());
+}
+
+// The detection stops sampling the surface near the instruments at kMaxContactSamples, before
+// it counts their contact points: a 0.1 mm wire of 5 cm hovering 5 mm above a 5 cm slab (5 mm
+// triangles) within a 10 mm alarm distance, which touches nothing. Killed by the bound left out
+// (tried: all 909,889 samples within the alarm distance became contact points before that
+// bound refused the step).
+TEST(Bounds, TooManySurfaceSamplesAreRefused) {
+  Scene s;
+  s.parenchyma.young_modulus = 3000;
+  s.parenchyma.poisson_ratio = 0.45;
+  Region bottom;
+  bottom.kind = Region::Kind::Box;
+  bottom.min = Eigen::Vector3d::Constant(-1);
+  bottom.max = Eigen::Vector3d(1, 1, 1e-9);
+  s.fixed.push_back(bottom);
+  s.contact.alarm_distance = 0.01;
+  const double length = 0.05;
+  LiverModel m(make_box_mesh({length, length, 0.02}, {10, 10, 1}), s);
+  ASSERT_TRUE(m.step().converged());
+  InstrumentOptions wire;
+  wire.name = "wire";
+  wire.type = Type::Shaft;
+  wire.radius = 1e-4;
+  wire.length = length;
+  wire.orientation = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::UnitX());
+  wire.position = Eigen::Vector3d(0, length / 2, 0.02 + wire.radius + 0.005);
+  m.add_instrument(wire);
+  const std::vector<double> before = m.observable_state();
+  try {
+    m.step();
+    ADD_FAILURE() << "the step took " << m.contact().contacts().size() << " contact points";
+  } catch (const std::length_error& e) {
+    EXPECT_NE(std::string(e.what()).find("surface samples near instruments.wire"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(same_bits(m.observable_state(), before));
 }
 
 // A model full of instruments takes a new one in the slot of one withdrawn since the last step,

@@ -310,6 +310,7 @@ bool InstrumentContact::detect(const Eigen::VectorXd& x) {
     return a.instrument == b.instrument && a.point.nodes == b.point.nodes && a.point.sample == b.point.sample;
   };
   contacts_next_.clear();
+  long samples = 0;
   for (int k = 0; k < num_instruments(); ++k) {
     const Instrument& in = instruments_[k];
     if (!in.options.enabled) continue;
@@ -328,6 +329,10 @@ bool InstrumentContact::detect(const Eigen::VectorXd& x) {
       near_triangles(in.options, in.pose, x, options_.alarm_distance,
                      [&](int t, const Eigen::Vector3d&, const Eigen::Vector3d&, const Eigen::Vector3d&) {
                        sample_triangle(t, spacing, [&](const SurfacePoint& s) {
+                         if (++samples > kMaxContactSamples)
+                           throw std::length_error("more than " + std::to_string(kMaxContactSamples) +
+                                                   " surface samples near instruments." + in.options.name +
+                                                   " (half its radius apart): too thin for the mesh, or the alarm distance too large");
                          // A point held at least half by the scene's supports is left to them:
                          // its free nodes alone could push it out only by moving twice as far or
                          // more (an instrument pressing on a support pinches the tissue there).
