@@ -307,6 +307,44 @@ TEST(Shaft, PressesAGrooveWithoutPenetration) {
   EXPECT_LE((total(m.stepper().support_forces()) - reaction.force).norm(), 1e-6 * reaction.force.norm());
 }
 
+// A shaft turned about its tip into the block, in one step, comes to the equilibrium the same
+// turn reaches in 20 small steps (frictionless: the path does not matter). Its far end travels
+// 2.4 mm and its tip not at all: the step must stage the turn by the far end's travel. Killed
+// by the stages counted by the tip's travel alone (tried: the one-step turn does not converge).
+TEST(Shaft, ATurnIsStagedByItsFarEnd) {
+  const double L = 0.02, r = 0.001, length = 0.03, theta = std::asin(2.0 / 25.0);
+  const Eigen::Quaterniond along_x = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::UnitX());
+  InstrumentOptions o;
+  o.name = "shaft";
+  o.type = InstrumentOptions::Type::Shaft;
+  o.radius = r;
+  o.length = length;
+  InstrumentOptions::Keyframe above, turned;
+  above.t = 1;
+  above.position = Eigen::Vector3d(-0.005, L / 2, L + r + 0.5e-3);  // 0.5 mm above the top face
+  above.orientation = along_x;
+  turned.t = 2;
+  turned.position = above.position;
+  turned.orientation = Eigen::AngleAxisd(theta, Eigen::Vector3d::UnitY()) * along_x;  // the far end dips
+  o.trajectory = {above, turned};
+  o.position = above.position;
+  o.orientation = above.orientation;
+  auto settle = [&](double dt) {
+    Scene s = block_scene(3000, 0.45, 0.0);
+    s.solver.dt = dt;
+    s.instruments.push_back(o);
+    auto m = std::make_unique<LiverModel>(make_box_mesh({L, L, L}, {8, 8, 8}), s);
+    while (m->time() < 2 - 1e-9) {
+      const StepResult res = m->step();
+      EXPECT_TRUE(res.converged()) << "dt " << dt << " at t = " << m->time() << ": " << res.message;
+    }
+    return m;
+  };
+  const auto one = settle(1.0), small = settle(0.05);
+  EXPECT_GT(one->instrument_reaction(0).force.z(), 0.0);
+  EXPECT_LT((one->positions() - small->positions()).cwiseAbs().maxCoeff(), 1e-7);
+}
+
 // The aspiration tube in frictional contact at its rim: the capsule reduces the lift by a
 // factor near 2 (the reference test's finding); the tissue pulls the tube down onto itself;
 // supports, rim and suction balance.

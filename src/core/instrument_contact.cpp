@@ -228,8 +228,13 @@ int InstrumentContact::begin_step(double t, const Eigen::VectorXd& x) {
         }
       }
       // In floating point until capped: the travel may be any finite length (the cast of a
-      // value beyond int's range is undefined).
-      const double travel = (in.pose.translation() - in.pose_start.translation()).norm();
+      // value beyond int's range is undefined). A shaft or a tube turned travels farthest at
+      // one of its ends.
+      double travel = (in.pose.translation() - in.pose_start.translation()).norm();
+      if (o.type == InstrumentOptions::Type::Shaft || o.type == InstrumentOptions::Type::Tube) {
+        const Eigen::Vector3d far_end(0, 0, o.length);
+        travel = std::max(travel, (in.pose * far_end - in.pose_start * far_end).norm());
+      }
       stages = std::max(stages, static_cast<int>(std::min<double>(kMaxStages, std::ceil(travel / (0.25 * size(o))))));
     }
     in.was_enabled = o.enabled;
