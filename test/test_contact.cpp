@@ -283,6 +283,42 @@ TEST(Grasper, HoldsWhileClosedAndReleasesWhenOpened) {
 
 // A shaft lying across the top face presses a groove: no penetration, pushed up, and the
 // forces of the tissue on it balance the supports.
+// A grasper that reaches no free node holds the nearest surface point, as a contact would: one
+// the supports carry half or more is theirs. Beside the fixed bottom edge of a coarse block it
+// holds nothing (lifting it would tear the few free nodes off the support: 77 N for 0.5 mm);
+// 8 mm up the same face it holds a point and lifts it. Killed by the fallback taking any point
+// with a free node (tried: it holds a point 98% on the support).
+TEST(Grasper, LeavesPointsTheSupportsCarryToThem) {
+  const double L = 0.02;
+  for (const double z : {2e-4, 8e-3}) {
+    Scene s = block_scene(3000, 0.45, 0.0);
+    s.solver.dt = 1.0;
+    InstrumentOptions g;
+    g.name = "grasper";
+    g.type = InstrumentOptions::Type::Grasper;
+    g.radius = 0.003;
+    for (int k = 0; k < 2; ++k) {  // closed beside the face x = 0, then lifted 0.5 mm
+      InstrumentOptions::Keyframe f;
+      f.t = 1 + k;
+      f.position = Eigen::Vector3d(-0.2e-3, L / 2, z + k * 0.5e-3);
+      f.closed = true;
+      g.trajectory.push_back(f);
+    }
+    g.position = g.trajectory[0].position;
+    s.instruments.push_back(g);
+    LiverModel m(make_box_mesh({L, L, L}, {2, 2, 2}), s);  // nodes 10 mm apart
+    ASSERT_TRUE(m.step().converged());
+    const bool supported = z < 1e-3;
+    EXPECT_EQ(m.contact().contacts().size(), supported ? 0u : 1u) << "z = " << z;
+    const StepResult lift = m.step();
+    EXPECT_TRUE(lift.converged()) << lift.message;
+    if (supported)
+      EXPECT_EQ(m.instrument_reaction(0).force.norm(), 0.0);
+    else
+      EXPECT_LT(m.instrument_reaction(0).force.z(), 0.0);  // the tissue holds the lifted jaws back
+  }
+}
+
 TEST(Shaft, PressesAGrooveWithoutPenetration) {
   const double L = 0.02, r = 0.003;
   LiverModel m(make_box_mesh({L, L, L}, {8, 8, 8}), block_scene(3000, 0.45, 0.2));

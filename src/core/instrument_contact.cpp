@@ -256,9 +256,10 @@ int InstrumentContact::begin_step(double t, const Eigen::VectorXd& x) {
             const TrianglePoint p = deepest_point(o, in.pose_start, a, b, c);
             const SurfacePoint s = SurfacePoint::on_triangle(boundary.row(f).transpose(), p.weights);
             const double distance = (s.at(x) - tip).norm();
-            bool free = false;
-            for (int j = 0; j < s.count; ++j) free |= !mechanics_.fixed_by_scene(s.nodes[j]);
-            if (distance > nearest || !free) continue;
+            // As for contacts (detect): a point held at least half by the supports is theirs.
+            double supported = 0;
+            for (int j = 0; j < s.count; ++j) supported += mechanics_.fixed_by_scene(s.nodes[j]) ? s.weights[j] : 0.0;
+            if (!(distance <= nearest) || !(supported < 0.5)) continue;
             nearest = distance;
             in.held.assign(1, s);
           }
