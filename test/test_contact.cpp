@@ -75,6 +75,32 @@ TEST(ClosestOnTriangle, MatchesDenseSampling) {
   }
 }
 
+// A triangle without area (two corners at one place, or three on a line) is its edges: weights
+// in [0, 1] summing to 1 at the closest point of the segments. Killed by the edges' and the
+// face's divisions left unguarded (tried: the first trial fails).
+TEST(ClosestOnTriangle, ATriangleWithoutAreaIsItsEdges) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  auto on_segment = [](const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    const Eigen::Vector3d e = b - a;
+    const double t = e.squaredNorm() > 0 ? std::clamp(e.dot(p - a) / e.squaredNorm(), 0.0, 1.0) : 0.0;
+    return (p - a - t * e).norm();
+  };
+  for (int trial = 0; trial < 200; ++trial) {
+    const Eigen::Vector3d a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng)), p = 2 * Eigen::Vector3d(u(rng), u(rng), u(rng));
+    const double s = u(rng);
+    for (const Eigen::Vector3d& c : {Eigen::Vector3d(b), Eigen::Vector3d(a + s * (b - a))}) {
+      const Eigen::Vector3d w = closest_on_triangle(p, a, b, c);
+      ASSERT_TRUE(w.allFinite()) << "trial " << trial;
+      EXPECT_NEAR(w.sum(), 1.0, 1e-12);
+      EXPECT_GE(w.minCoeff(), -1e-12);
+      EXPECT_LE(w.maxCoeff(), 1 + 1e-12);
+      const double d = (p - (w[0] * a + w[1] * b + w[2] * c)).norm();
+      EXPECT_NEAR(d, std::min({on_segment(p, a, b), on_segment(p, b, c), on_segment(p, a, c)}), 1e-9) << "trial " << trial;
+    }
+  }
+}
+
 // The closest pair between a segment (a shaft's axis) and a triangle, against dense sampling of
 // both: no sampled pair is closer, and the pair found is no farther than the sampling's spacing
 // allows. It sets how deep an appearing shaft sits in the surface (how far it retreats before it

@@ -7,10 +7,38 @@
 
 namespace liver_sim {
 
+namespace {
+
+// The weights of the closest point of (a, b, c) to p on its edges alone: for a triangle with no
+// area (coincident or collinear corners), where the face's and some edges' formulas divide by 0.
+Eigen::Vector3d closest_on_edges(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                 const Eigen::Vector3d& c) {
+  const Eigen::Vector3d corner[3] = {a, b, c};
+  Eigen::Vector3d best(1, 0, 0);
+  double nearest = (p - a).squaredNorm();
+  for (int i = 0; i < 3; ++i) {
+    const int j = (i + 1) % 3;
+    const Eigen::Vector3d e = corner[j] - corner[i];
+    const double length = e.squaredNorm();
+    const double t = length > 0 ? std::clamp(e.dot(p - corner[i]) / length, 0.0, 1.0) : 0.0;
+    const double d = (p - corner[i] - t * e).squaredNorm();
+    if (d < nearest) {
+      nearest = d;
+      best.setZero();
+      best[i] = 1 - t;
+      best[j] = t;
+    }
+  }
+  return best;
+}
+
+}  // namespace
+
 Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
                                     const Eigen::Vector3d& c) {
   // Voronoi regions of the vertices, then the edges, else the face (Ericson, Real-Time
-  // Collision Detection, 5.1.5).
+  // Collision Detection, 5.1.5). Each division is by a squared edge length or twice the area
+  // squared, up to rounding: a triangle without area goes to its edges.
   const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
   const double d1 = ab.dot(ap), d2 = ac.dot(ap);
   if (d1 <= 0 && d2 <= 0) return {1, 0, 0};
@@ -19,6 +47,7 @@ Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vecto
   if (d3 >= 0 && d4 <= d3) return {0, 1, 0};
   const double vc = d1 * d4 - d3 * d2;
   if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    if (!(d1 - d3 > 0)) return closest_on_edges(p, a, b, c);
     const double v = d1 / (d1 - d3);
     return {1 - v, v, 0};
   }
@@ -27,14 +56,20 @@ Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vecto
   if (d6 >= 0 && d5 <= d6) return {0, 0, 1};
   const double vb = d5 * d2 - d1 * d6;
   if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    if (!(d2 - d6 > 0)) return closest_on_edges(p, a, b, c);
     const double w = d2 / (d2 - d6);
     return {1 - w, 0, w};
   }
   const double va = d3 * d6 - d5 * d4;
   if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    if (!((d4 - d3) + (d5 - d6) > 0)) return closest_on_edges(p, a, b, c);
     const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
     return {0, 1 - w, w};
   }
+  // The face: va + vb + vc is the area squared times 4 (ab x ac squared), which rounding may
+  // leave far from it when the corners are nearly collinear.
+  const double area2 = ab.cross(ac).squaredNorm();
+  if (!(area2 > 1e-12 * ab.squaredNorm() * ac.squaredNorm())) return closest_on_edges(p, a, b, c);
   const double denominator = 1.0 / (va + vb + vc);
   const double v = vb * denominator, w = vc * denominator;
   return {1 - v - w, v, w};
