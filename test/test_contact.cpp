@@ -139,6 +139,21 @@ TEST(ClosestPoints, SegmentTriangleMatchesDenseSampling) {
 
 // One contact with W = w I: the gap closes, the tangential force sticks inside the cone and
 // sits on its edge against the slip outside it; an open gap gives no force.
+// A quaternion is a rotation at any scale: (0, 1e200, 0, 0) is the half turn about x (its
+// norm() overflows to infinity, and normalized() made it zero: the identity). Killed by
+// make_pose with normalized() (tried).
+TEST(Instrument, AQuaternionOfAnyScaleIsItsRotation) {
+  const Eigen::Vector3d p(0.01, 0, 0);
+  const Eigen::Matrix3d half_turn = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  EXPECT_TRUE(make_pose(p, Eigen::Quaterniond(0, 1e200, 0, 0)).linear().isApprox(half_turn, 1e-12));
+  EXPECT_TRUE(make_pose(p, Eigen::Quaterniond(0, 1e-100, 0, 0)).linear().isApprox(half_turn, 1e-12));
+  InstrumentOptions o = probe("p", p, 0.003);
+  o.orientation = Eigen::Quaterniond(0, 1e200, 0, 0);
+  EXPECT_EQ(validate(o), "");
+  o.orientation = Eigen::Quaterniond(0, 1e-100, 0, 0);  // below the bound: no direction to trust
+  EXPECT_NE(validate(o), "");
+}
+
 TEST(ContactSolver, SingleContactSignoriniAndCoulomb) {
   const double w = 2e-3, mu = 0.5;
   const Eigen::MatrixXd W = w * Eigen::MatrixXd::Identity(3, 3);

@@ -24,7 +24,8 @@ SurfaceDistance around_point(const Eigen::Vector3d& x, const Eigen::Vector3d& c,
 
 Eigen::Isometry3d make_pose(const Eigen::Vector3d& position, const Eigen::Quaterniond& orientation) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() = orientation.normalized().toRotationMatrix();
+  // Scaled without squaring: a quaternion of 1e200 is a rotation too (its norm() overflows).
+  T.linear() = Eigen::Quaterniond(orientation.coeffs() / orientation.coeffs().stableNorm()).toRotationMatrix();
   T.translation() = position;
   return T;
 }
