@@ -156,7 +156,9 @@ struct InstrumentOptions {
 
 constexpr int kMaxInstruments = 16;  // instruments in one model (InstrumentContact::add_instrument)
 // Contact points of all instruments in one detection (InstrumentContact::detect): the Delassus
-// operator of m points is a dense 3m x 3m matrix filled in O(m^2), 288 MB at this bound. The
+// operator of m points is a dense 3m x 3m matrix filled in O(m^2), 288 MB at this bound, and
+// the nodes' compliance cache (NodeCompliance: up to twice the nodes in contact, 3 x 3 blocks
+// between all of them) up to about 1.2 GB more on one factor. The
 // aspiration tube pressing its cube makes 16; a wire of 0.1 mm lying 4 mm along the probe cube's
 // face, 2,913.
 constexpr int kMaxContacts = 2000;
