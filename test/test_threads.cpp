@@ -5,6 +5,7 @@
 // faulting it in again. No timing is asserted.
 #include <gtest/gtest.h>
 #include <sys/resource.h>
+#include <sys/syscall.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -200,6 +201,55 @@ TEST(Memory, FreedBlocksAreReusedWithoutFaultingThemInAgain) {
   for (int i = 0; i < 3; ++i) round();
   const long pages = static_cast<long>(4 * kBlock) / sysconf(_SC_PAGESIZE);
   EXPECT_LT(page_faults() - before, 3 * pages / 100) << "of " << 3 * pages << " pages written";
+}
+
+// The slice each thread asked for, as sched_getattr reports it (ns): for normal scheduling the
+// kernel's answer in sched_runtime (Linux 6.12+; earlier kernels report 0).
+uint64_t slice_of(long tid) {
+  struct {
+    uint32_t size, policy;
+    uint64_t flags;
+    int32_t nice;
+    uint32_t priority;
+    uint64_t runtime, deadline, period;
+  } a{};
+  if (syscall(SYS_sched_getattr, tid, &a, sizeof a, 0) != 0) return 0;
+  return a.runtime;
+}
+
+// The message threads take the slice; the caller (the simulation thread) and a background job
+// (nice +10) keep theirs, the job its nice value too. Killed by the background jobs not left out
+// (tried: the job took the slice).
+TEST(Threads, OtherThreadsTakeTheSliceTheCallerAndBackgroundJobsKeepTheirs) {
+  std::atomic<long> helper{0}, job{0};
+  std::atomic<bool> done{false};
+  std::thread a([&] {
+    helper = syscall(SYS_gettid);
+    while (!done) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  });
+  std::thread b([&] {
+    lower_calling_thread_priority();
+    job = syscall(SYS_gettid);
+    while (!done) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  });
+  while (helper == 0 || job == 0) std::this_thread::yield();
+  const long self = syscall(SYS_gettid);
+  const uint64_t before = slice_of(self);
+  EXPECT_EQ(set_slice_of_other_threads(2e-4), "");
+  if (slice_of(helper) == 0) {
+    done = true;
+    a.join();
+    b.join();
+    GTEST_SKIP() << "a kernel before 6.12: no slice per thread";
+  }
+  EXPECT_EQ(slice_of(helper), 200000u);
+  EXPECT_NE(slice_of(job), 200000u);
+  EXPECT_EQ(getpriority(PRIO_PROCESS, static_cast<id_t>(job.load())), 10);
+  EXPECT_EQ(slice_of(self), before);
+  EXPECT_NE(set_slice_of_other_threads(1.0), "");  // beyond the bounds
+  done = true;
+  a.join();
+  b.join();
 }
 
 }  // namespace

@@ -92,6 +92,13 @@ std::string set_realtime_priority(int priority);
 // CHOLMOD's OpenMP regions on it (cholmod_solver.cpp). The nice value is per thread on Linux; a
 // thread started by the simulation's would otherwise inherit its real-time scheduling.
 void lower_calling_thread_priority();
+// The scheduler's slice (Linux 6.12+, EEVDF; s, in [1e-4, 0.1]) of every thread of the process
+// but the calling one and those at a lower priority (nice > 0: background jobs): a thread that
+// asks for a short slice runs at once when it wakes on a busy core, ahead of threads with
+// longer ones, its share of the processor unchanged. For the threads that only wake to pass a
+// message on (callbacks, roscpp's network threads, a heartbeat). Earlier kernels keep their own
+// slice. Returns "" when every such thread took it, else the first refusal.
+std::string set_slice_of_other_threads(double seconds);
 // Memory the process frees stays with it, for the next allocation to reuse: no block under
 // 32 MiB is mapped for itself, and the heap is not given back to the system. Otherwise a
 // block freed by one analysis or cloud and allocated again by the next is handed back and
