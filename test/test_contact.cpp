@@ -40,6 +40,14 @@ InstrumentOptions probe(const std::string& name, const Eigen::Vector3d& centre, 
   return o;
 }
 
+InstrumentOptions grasper(double radius) {
+  InstrumentOptions o;
+  o.name = "grasper";
+  o.type = InstrumentOptions::Type::Grasper;
+  o.radius = radius;
+  return o;
+}
+
 Eigen::Vector3d node(const LiverModel& m, int i) { return m.positions().segment<3>(3 * i); }
 
 // Sum over nodes of a per-DOF force vector.
@@ -287,10 +295,7 @@ TEST(Grasper, HoldsWhileClosedAndReleasesWhenOpened) {
   const double L = 0.02;
   Scene s = block_scene(3000, 0.45, 0.0);
   s.solver.dt = 1.0;
-  InstrumentOptions g;
-  g.name = "grasper";
-  g.type = InstrumentOptions::Type::Grasper;
-  g.radius = 0.003;
+  InstrumentOptions g = grasper(0.003);
   const Eigen::Vector3d at(L / 2, L / 2, L);
   for (const auto& [t, lift, closed] : std::vector<std::tuple<double, double, bool>>{{1, 0, true}, {2, 0.002, true}, {3, 0.002, false}}) {
     InstrumentOptions::Keyframe f;
@@ -334,10 +339,7 @@ TEST(Grasper, LeavesPointsTheSupportsCarryToThem) {
   for (const double z : {2e-4, 8e-3}) {
     Scene s = block_scene(3000, 0.45, 0.0);
     s.solver.dt = 1.0;
-    InstrumentOptions g;
-    g.name = "grasper";
-    g.type = InstrumentOptions::Type::Grasper;
-    g.radius = 0.003;
+    InstrumentOptions g = grasper(0.003);
     for (int k = 0; k < 2; ++k) {  // closed beside the face x = 0, then lifted 0.5 mm
       InstrumentOptions::Keyframe f;
       f.t = 1 + k;

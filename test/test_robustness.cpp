@@ -491,6 +491,18 @@ TEST(Bounds, RefusalsChangeNothing) {
   EXPECT_TRUE(m.step().converged());
 }
 
+// The next step throws std::length_error naming `what` and leaves the model to the last bit.
+void expect_contact_bound_refuses_step(LiverModel& m, const std::string& what) {
+  const std::vector<double> before = m.observable_state();
+  try {
+    m.step();
+    ADD_FAILURE() << "the step took " << m.contact().contacts().size() << " contact points";
+  } catch (const std::length_error& e) {
+    EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(same_bits(m.observable_state(), before));
+}
+
 // A wire of 0.1 mm lying 4 mm along the top face (every surface sample within the alarm
 // distance, 0.05 mm apart, is a contact point) is refused at detection: the step throws, the
 // state keeps its bits, and the wire lifted off, the next step converges. Without the bound the
@@ -508,14 +520,7 @@ TEST(Bounds, TooManyContactPointsAreRefused) {
   wire.orientation = Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY()));  // along x
   wire.position = Eigen::Vector3d(0.002, 0.0075, 0.015 + 0.5 * wire.radius);
   const int k = m.add_instrument(wire);
-  const std::vector<double> before = m.observable_state();
-  try {
-    m.step();
-    ADD_FAILURE() << "the step took " << m.contact().contacts().size() << " contact points";
-  } catch (const std::length_error& e) {
-    EXPECT_NE(std::string(e.what()).find("instruments.wire"), std::string::npos) << e.what();
-  }
-  EXPECT_TRUE(same_bits(m.observable_state(), before));
+  expect_contact_bound_refuses_step(m, "instruments.wire");
   wire.position.z() += 0.005;
   m.update_instrument(k, wire);
   EXPECT_TRUE(m.step().converged());
@@ -547,14 +552,7 @@ TEST(Bounds, TooManySurfaceSamplesAreRefused) {
   wire.orientation = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), Eigen::Vector3d::UnitX());
   wire.position = Eigen::Vector3d(0, length / 2, 0.02 + wire.radius + 0.005);
   m.add_instrument(wire);
-  const std::vector<double> before = m.observable_state();
-  try {
-    m.step();
-    ADD_FAILURE() << "the step took " << m.contact().contacts().size() << " contact points";
-  } catch (const std::length_error& e) {
-    EXPECT_NE(std::string(e.what()).find("surface samples near instruments.wire"), std::string::npos) << e.what();
-  }
-  EXPECT_TRUE(same_bits(m.observable_state(), before));
+  expect_contact_bound_refuses_step(m, "surface samples near instruments.wire");
 }
 
 // A model full of instruments takes a new one in the slot of one withdrawn since the last step,

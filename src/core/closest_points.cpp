@@ -66,11 +66,10 @@ Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vecto
     const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
     return {0, 1 - w, w};
   }
-  // The face: va + vb + vc is the area squared times 4 (ab x ac squared), which rounding may
-  // leave far from it when the corners are nearly collinear.
-  const double area2 = ab.cross(ac).squaredNorm();
-  if (!(area2 > 1e-12 * ab.squaredNorm() * ac.squaredNorm())) return closest_on_edges(p, a, b, c);
-  const double denominator = 1.0 / (va + vb + vc);
+  // The face: va + vb + vc is |ab x ac|^2, zero or rounding for corners (nearly) on a line.
+  const double area_squared = va + vb + vc;
+  if (!(area_squared > 1e-12 * ab.squaredNorm() * ac.squaredNorm())) return closest_on_edges(p, a, b, c);
+  const double denominator = 1.0 / area_squared;
   const double v = vb * denominator, w = vc * denominator;
   return {1 - v - w, v, w};
 }
