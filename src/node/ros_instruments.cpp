@@ -171,7 +171,7 @@ void RosInstruments::on_command(const InstrumentCommand::ConstPtr& msg) {
   // instrument out of the scene without a word.
   if (!c.remove && !c.frame.empty()) {
     const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(settings_.tf_timeout);
-    while (!tf_.canTransform(settings_.frame_id, c.frame, ros::Time(0), &error) && ros::WallTime::now() < end)
+    while (!tf_.canTransform(settings_.frame_id, c.frame, ros::Time(0)) && ros::WallTime::now() < end)
       ros::WallDuration(0.005).sleep();
     if (!tf_.canTransform(settings_.frame_id, c.frame, ros::Time(0), &error))
       return reject_("instrument_command " + c.name + ": frame '" + c.frame + "' unknown to tf (" + error + ")");
