@@ -30,7 +30,8 @@ receivers) and between the node's stamps (each receiver gap is listed with how f
 node stamped its two statuses, how much later than usual the second arrived, how long a
 watcher on the receiver's core, which only sleeps 1 ms at a time, was kept from running, and how
 long the receiver collected garbage meanwhile); the achieved frame rate at least 90% of that
-rate; the late latency at most twice the early one + 0.2 s. As a rostest (--rostest) only the checks
+rate over the time the injected delays leave (each held-up step's status says so; the rate over
+the whole run is reported too); the late latency at most twice the early one + 0.2 s. As a rostest (--rostest) only the checks
 that hold at any speed are asserted, and a gap bound it can judge on a shared machine: none
 above --max-gap seconds (the node's step time budget makes a
 frame at most one Newton iteration and one stage long, about 0.7 s on the phantom with contact;
@@ -68,6 +69,8 @@ from std_srvs.srv import Trigger
 
 SURFACE_Z = 0.039   # m, sagged surface of the phantom's right lobe under the probe
 RADIUS = 0.0025     # m, launch file's probe radius
+HELD_UP_TEXT = "test hook: held up 0.3 s"  # in the status of a step the injected delay held up (step_guard.h)
+HELD_UP_S = 0.3
 
 
 def marker_fields(raw, o=0):
@@ -429,6 +432,10 @@ class Soak:
         # frame makes the loop miss frames, which the node's achieved rate shows.
         rates = [m.rate for _, m in window if m.rate > 0]
         achieved = float(np.mean(rates)) if rates else 0.0
+        # The injected delays (the node tells each held-up step) stop the loop on purpose, 0.3 s
+        # each: the rate the node keeps is judged over the time they leave.
+        held = sum(HELD_UP_S for _, m in window if m.state != "busy" and HELD_UP_TEXT in m.text)
+        kept = achieved * span / (span - held) if span > held else 0.0
         r = {
             "warmup_s": round(self.warmup, 1),
             "duration_s": round(span, 1),
@@ -456,7 +463,9 @@ class Soak:
                           "max": round(max(l for _, l in lat), 3) if lat else None},
             "frames": {"asked_hz": self.node_rate, "achieved_mean_hz": round(achieved, 2),
                        "dropped": int(round(max(0.0, self.node_rate - achieved) * span)),
-                       "done": int(round(achieved * span))},
+                       "done": int(round(achieved * span)),
+                       "held_up_on_purpose_s": round(held, 1),
+                       "achieved_outside_the_injected_delays_hz": round(kept, 2)},
             "refused_inputs_counted": (last.rejected_inputs - rejected_start) if last else None,
             "faults": {"injected_every_frames": self.fault_every,
                        "counted": (last.faults - faults_start) if last else None,
@@ -488,7 +497,7 @@ class Soak:
         timing = {
             "status gaps <= two frames": bool(gaps) and max(gaps) <= 2.0 / self.node_rate,
             "status stamps (when the node published) <= two frames apart": bool(stamp_gaps) and max(stamp_gaps) <= 2.0 / self.node_rate,
-            "frame rate >= 90% of the node's rate": achieved >= 0.9 * self.node_rate,
+            "frame rate >= 90% of the node's rate (outside the injected delays)": kept >= 0.9 * self.node_rate,
             "no growing queue (late latency <= 2 x early + 0.2 s)": bool(early) and bool(late)
             and np.median(late) <= 2 * np.median(early) + 0.2,
         }

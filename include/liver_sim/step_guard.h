@@ -42,6 +42,8 @@ class StepGuard {
   // fault (NewtonStepper::inject_fault), in turn an exception, an allocation failure, a NaN in the
   // update, a negative pivot and an update held up for 0.3 s.
   void set_test_fault_every(int n) { fault_every_ = n; }
+  // Appended to the message of a step the injected delay held up (the soak finds those steps by it).
+  static constexpr const char* kHeldUpText = "test hook: held up 0.3 s";
 
  private:
   void inject(LiverModel& model);

@@ -19,6 +19,8 @@ void StepGuard::inject(LiverModel& model) {
   model.stepper().inject_fault(kCycle[injected_++ % std::size(kCycle)]);
 }
 
+static_assert(NewtonStepper::kInjectedDelay == std::chrono::milliseconds(300), "StepGuard::kHeldUpText tells 0.3 s");
+
 StepResult StepGuard::fault(const std::string& text) {
   count(text);
   last_step_faulted_ = true;
@@ -37,6 +39,11 @@ StepResult StepGuard::checked(LiverModel& model, const StepResult& r) {
   if (r.status == StepResult::Status::Diverged && r.message.rfind("non-finite", 0) == 0) {
     count(r.message);
     last_step_faulted_ = true;
+  }
+  if (model.stepper().held_up_on_purpose()) {
+    StepResult told = r;
+    told.message += std::string(told.message.empty() ? "" : "; ") + kHeldUpText;
+    return told;
   }
   return r;
 }
