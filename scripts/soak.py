@@ -23,7 +23,8 @@ Exits 1 when a check fails. Checks that hold at any speed: the node is alive; ~s
 every step (its step counter never skips one, a reset starting it again); RSS grew by at most
 10% + 20 MB; nothing non-finite was published (every floating-point field of every message);
 the refused inputs counted match those sent; with injected faults, some were counted, the
-node went on stepping after each, and heartbeats ("busy") came while steps were held up.
+node went on stepping after each, heartbeats ("busy") came while steps were held up, and the
+held-up steps' statuses said so.
 Wall-clock checks: no ~status gap longer than two frames of the node's rate, between arrivals
 at a process of its own that only receives ~status (this one builds clouds, which pauses its
 receivers) and between the node's stamps (each receiver gap is listed with how far apart the
@@ -491,6 +492,9 @@ class Soak:
             # A held-up step lasts nine frames of 30 Hz: without the heartbeat, no "busy" at all
             # (tried: the heartbeat disabled fails the 30 s rostest here, 0 busy of 530 statuses).
             "heartbeats while the injected delays held steps up": self.fault_every == 0 or busy > 0,
+            # Every fifth injection is a delay: within two cycles of five at least one was taken.
+            "the held-up steps' statuses say so": self.fault_every == 0 or achieved * span < 10 * self.fault_every
+            or held > 0,
             "no status gap above %g s" % self.max_gap: bool(gaps) and max(gaps) <= self.max_gap,
         }
         # Wall-clock checks: judged by the standalone soak (scripts/soak.sh, a quiet pinned
