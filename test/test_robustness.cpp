@@ -190,8 +190,9 @@ Scene aspiration_cube() {
 // steps fail and roll back, and the fifth is held up for 0.3 s, which is no failure but says so in
 // its message: the soak finds the held-up steps by that text and judges the frame rate over the
 // time they leave. Kills a held-up step that does not say so (tried: the append in
-// StepGuard::checked dropped; the soak would count the delays against the node) and a step that
-// says so without being held up (tried: the flag not cleared at the step's start).
+// StepGuard::step dropped; the soak would count the delays against the node) and a step that
+// says so without being held up (tried: any step after a hold-up told, the stepper's count
+// compared with 0 instead of with its value before the step).
 TEST(StepGuard, AnInjectedHoldUpSaysSoAndNoOtherStepDoes) {
   const Scene s = scene_with(Type::Probe);
   LiverModel m(load_scene_mesh(s), s);

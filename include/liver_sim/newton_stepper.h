@@ -132,9 +132,9 @@ class NewtonStepper {
   };
   static constexpr std::chrono::milliseconds kInjectedDelay{300};
   void inject_fault(InjectedFault f) { fault_ = f; }
-  // The last step was held up by an injected Slow fault (the soak leaves that time out of the
-  // frame rate it judges).
-  bool held_up_on_purpose() const { return held_up_on_purpose_; }
+  // Steps held up by an injected Slow fault since construction (the soak leaves that time out of
+  // the frame rate it judges).
+  long held_up_on_purpose() const { return held_up_on_purpose_; }
 
   // Force the supports exert on the tissue at the fixed DOFs (N; 0 elsewhere).
   Eigen::VectorXd support_forces();
@@ -192,7 +192,7 @@ class NewtonStepper {
   bool snapshot_valid_ = false;
   long factorizations_ = 0;  // CHOLMOD factorisations since construction
   InjectedFault fault_ = InjectedFault::None;
-  bool held_up_on_purpose_ = false;
+  long held_up_on_purpose_ = 0;
   std::chrono::steady_clock::time_point deadline_;  // of the step in progress (time_budget)
   std::chrono::steady_clock::duration factorization_time_{};  // of the last CHOLMOD factorisation
 

@@ -20,15 +20,20 @@ class StepGuard {
   template <typename Step>
   StepResult step(LiverModel& model, const Step& step) {
     inject(model);
+    const long held_up = model.stepper().held_up_on_purpose();
     StepResult r;
     try {
       r = step();
     } catch (const std::exception& e) {
-      return fault(std::string("exception in the step: ") + e.what());
+      r = fault(std::string("exception in the step: ") + e.what());
     } catch (...) {
-      return fault("exception of unknown type in the step");
+      r = fault("exception of unknown type in the step");
     }
-    return checked(model, r);
+    if (!last_step_faulted_) r = checked(model, r);
+    // However often the step solved (a registration frame may solve twice) and however it ended.
+    if (model.stepper().held_up_on_purpose() != held_up)
+      r.message += std::string(r.message.empty() ? "" : "; ") + kHeldUpText;
+    return r;
   }
 
   // Counts a fault caught elsewhere in the loop (an input's application, publishing).

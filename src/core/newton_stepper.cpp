@@ -242,7 +242,6 @@ StepResult NewtonStepper::advance() {
                            std::chrono::duration<double>(std::min(solver_.time_budget, 1e6)));
   StepResult result;
   x_start_ = x_;
-  held_up_on_purpose_ = false;
   if (fault_ == InjectedFault::NotPositiveDefinite) drop_factor();  // a factorisation for the fault to meet
   const bool dynamic = solver_.mode == SolverOptions::Mode::Dynamic;
   if (dynamic && solver_.rayleigh_stiffness > 0) {
@@ -641,7 +640,7 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     if (take_fault(InjectedFault::OutOfMemory)) throw std::bad_alloc();
     if (take_fault(InjectedFault::Slow)) {
       std::this_thread::sleep_for(kInjectedDelay);
-      held_up_on_purpose_ = true;
+      ++held_up_on_purpose_;
     }
     // Modified Newton keeps its factor while it contracts the residual well: the residual it
     // was asked to zero, which carries the update's change of the contact forces (a step that

@@ -40,11 +40,6 @@ StepResult StepGuard::checked(LiverModel& model, const StepResult& r) {
     count(r.message);
     last_step_faulted_ = true;
   }
-  if (model.stepper().held_up_on_purpose()) {
-    StepResult told = r;
-    told.message += std::string(told.message.empty() ? "" : "; ") + kHeldUpText;
-    return told;
-  }
   return r;
 }
 
