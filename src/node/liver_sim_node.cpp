@@ -750,7 +750,9 @@ class LiverSimNode {
       std::lock_guard<std::mutex> lock(status_mutex_);
       status_pub_.publish(s);
       last_status_ = s;
-      last_status_time_ = ros::WallTime::now();
+      // When it was stamped, not when the publish returned: the heartbeat keeps the stamps (and
+      // so the arrivals) within a frame of each other, however long building and sending took.
+      last_status_time_ = now;
       frame_period_ = 1.0 / rate_;
     }
     instruments_->publish(*model_, s.header);
