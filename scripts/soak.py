@@ -27,11 +27,13 @@ node went on stepping after each, heartbeats ("busy") came while steps were held
 many held-up steps said so in their statuses as one injection in five (within 10% + 2).
 Wall-clock checks: no ~status gap longer than two frames of the node's rate, between arrivals
 at a process of its own that only receives ~status (this one builds clouds, which pauses its
-receivers) and between the node's stamps (each receiver gap is listed with how far apart the
-node stamped its two statuses, how much later than usual the second arrived, how long a
-watcher on the receiver's core, which only sleeps 1 ms at a time, was kept from running, and how
-long the receiver collected garbage meanwhile; a receiver gap is judged as the node's stamps
-apart plus the second status's lateness beyond those pauses of the receiver's own); the achieved
+receivers) and between the node's stamps. A watch on every core, ahead of everything else
+there, notes when it was kept from running: where all were at once, the machine stood still.
+Each gap is listed with how long the machine stood still between the two stamps, and each
+receiver gap also with how much later than usual the second status arrived, how long the
+receiver's core was stalled and how long the receiver collected garbage meanwhile. A stamp gap
+is judged without the machine's stalls; a receiver gap as the node's stamps apart (without the
+machine's stalls) plus the second status's lateness beyond the receiver's own pauses. The achieved
 frame rate (frames counted by the status's step counter) at least 90% of that
 rate over the time the injected delays leave (each held-up step's status says so; the rate over
 the whole run is reported too); the late latency at most twice the early one + 0.2 s. As a rostest (--rostest) only the checks
@@ -144,32 +146,46 @@ def receive_status(stop, pipe):
     pipe.send((list(arrivals), [c for c in collections if c[1] - c[0] > 0.005]))
 
 
-def on_the_watched_core():
-    """The status receiver and the core watch: one core (the first this process may use), ahead
-    of the soak's own process (where allowed)."""
-    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+def receiver_core():
+    """The core of the status receiver: the first this process may use."""
+    return min(os.sched_getaffinity(0))
+
+
+def on_the_watched_core(core=None):
+    """The status receiver and the core watches: on one core (by default the receiver's), ahead
+    of the soak's own process and of the node (where allowed)."""
+    os.sched_setaffinity(0, {receiver_core() if core is None else core})
     try:
         os.nice(-10)
     except PermissionError:
         pass
 
 
-def watch_core(stop, pipe):
-    """A process of its own beside the status receiver (same core, same priority) that only
-    sleeps 1 ms at a time and notes when it woke more than 10 ms late: the times at which that
-    core ran none of the receiver's kind (a stall of the core, not of the node)."""
-    on_the_watched_core()
-    stalls, last, ticks = [], time.monotonic(), 0
+def watch_core(core, stop, pipe):
+    """A process of its own on one core, ahead of the others there, that only sleeps 5 ms at a
+    time and notes from when it was due until it ran, when that was more than 10 ms: the times
+    at which that core ran nothing of its kind (a stall of the core, not of a process on it).
+    One runs on every core: where all of them were kept from running at once, the machine stood
+    still (a virtual machine's host did not run it), which no process inside can cause or
+    avoid."""
+    try:
+        on_the_watched_core(core)
+    except OSError:  # a core this process may not use (a container's cpuset)
+        pipe.send(None)
+        return
+    started = time.monotonic()
+    stalls, last, ticks = [], started, 0
     while not stop.is_set():
-        time.sleep(0.001)
+        time.sleep(0.005)
         now = time.monotonic()
-        if now - last > 0.011:
-            stalls.append((last, now))
+        if now - (last + 0.005) > 0.010:
+            stalls.append((last + 0.005, now))
         last = now
         ticks += 1
-        if ticks % 1000 == 0 and not multiprocessing.parent_process().is_alive():
+        if ticks % 200 == 0 and not multiprocessing.parent_process().is_alive():
             return
-    pipe.send(stalls)
+    # What the watch itself took of its core (it runs ahead of the node on the node's core).
+    pipe.send((stalls, time.process_time() / (time.monotonic() - started)))
 
 
 def receive(pipe, nothing):
@@ -195,6 +211,14 @@ def enumerate_resets(window):
 def overlap(a, b, intervals):
     """How long the (start, end) intervals cover of [a, b] (s)."""
     return sum(max(0.0, min(b, e) - max(a, s)) for s, e in intervals)
+
+
+def common_intervals(lists):
+    """The times covered by an interval of every list (each list's intervals disjoint)."""
+    common = lists[0] if lists else []
+    for other in lists[1:]:
+        common = [(max(s, t), min(e, u)) for s, e in common for t, u in other if max(s, t) < min(e, u)]
+    return sorted(common)
 
 
 def node_pid():
@@ -347,10 +371,15 @@ class Soak:
         receiver = spawn.Process(target=receive_status, args=(receiver_stop, arrivals_out), daemon=True)
         receiver.start()
         arrivals_out.close()  # the child's end: a receiver that dies unsent ends recv() at once
-        stalls_in, stalls_out = spawn.Pipe(duplex=False)
-        watch = spawn.Process(target=watch_core, args=(receiver_stop, stalls_out), daemon=True)
-        watch.start()
-        stalls_out.close()
+        # A core watch on every core the machine has, the node's included (200 wake-ups a
+        # second: its share of the core is reported); one that cannot be placed sends nothing.
+        watches = []
+        for core in range(os.cpu_count()):
+            stalls_in, stalls_out = spawn.Pipe(duplex=False)
+            watch = spawn.Process(target=watch_core, args=(core, receiver_stop, stalls_out), daemon=True)
+            watch.start()
+            stalls_out.close()
+            watches.append((core, watch, stalls_in))
         deadline = time.monotonic() + 60
         while not self.status and time.monotonic() < deadline:
             time.sleep(0.1)
@@ -391,9 +420,12 @@ class Soak:
         stop.set()
         receiver_stop.set()
         arrivals, collections = receive(arrivals_in, ([], []))
-        stalls = receive(stalls_in, [])
+        stalls = {core: receive(pipe, None) for core, _, pipe in watches}
+        self.watch_share = max((w[1] for w in stalls.values() if w), default=0.0)
+        stalls = {core: w[0] if w else None for core, w in stalls.items()}
         receiver.join(5)
-        watch.join(5)
+        for _, watch, _ in watches:
+            watch.join(5)
         for t in threads:
             t.join(5)
         return self.report(pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end, arrivals,
@@ -406,21 +438,34 @@ class Soak:
         arrived = [a for a in arrivals if t_start <= a[0] <= t_end]
         received = [t for t, _, _ in arrived]
         gaps = [b - a for a, b in zip(received, received[1:])]
+        # The core watches' stalls (watch_core): the receiver's core's, and the machine's (every
+        # core's at once; none when a core had no watch). The node stamps on the wall clock.
+        core_stalls = stalls
+        stalls = core_stalls.get(receiver_core()) or []
+        watched = list(core_stalls.values())
+        machine = common_intervals(watched) if watched and None not in watched else []
+        wall_minus_monotonic = time.time() - time.monotonic()
+
+        def machine_stalled(stamp_a, stamp_b):
+            return overlap(stamp_a - wall_minus_monotonic, stamp_b - wall_minus_monotonic, machine)
+
         # Each receiver gap over two frames, told apart: how far apart the node stamped the two
-        # statuses, how much later than usual the second arrived (wall-clock arrival - stamp,
-        # over its median), how long the receiver's core was stalled (watch_core) and how long
-        # the receiver collected garbage within the gap.
+        # statuses and how long the machine stood still between the stamps, how much later than
+        # usual the second arrived (wall-clock arrival - stamp, over its median), how long the
+        # receiver's core was stalled and how long the receiver collected garbage within the gap.
         usual = float(np.median([wall - stamp for _, wall, stamp in arrived])) if arrived else 0.0
         long_gaps = [{"at_s": round(a - t_start, 1), "gap_s": round(b - a, 3), "stamps_apart_s": round(sb - sa, 3),
+                      "machine_stalled_between_the_stamps_s": round(machine_stalled(sa, sb), 3),
                       "delivered_late_by_s": round(wb - sb - usual, 3),
                       "receiver_core_stalled_s": round(overlap(a, b, stalls), 3),
                       "receiver_collecting_garbage_s": round(overlap(a, b, collections), 3)}
                      for (a, _, sa), (b, wb, sb) in zip(arrived, arrived[1:]) if b - a > 2.0 / self.node_rate]
         stalls = [(s, e) for s, e in stalls if t_start <= s <= t_end]
+        machine = [(s, e) for s, e in machine if t_start <= s <= t_end]
         collections = [(s, e) for s, e in collections if t_start <= s <= t_end]
         with self.lock:
             window = [(t, m) for t, m in self.status if t_start <= t <= t_end]
-            stamp_gaps = [b[1].header.stamp.to_sec() - a[1].header.stamp.to_sec() for a, b in zip(window, window[1:])]
+            stamps = [m.header.stamp.to_sec() for _, m in window]
             # Between the loop's own statuses, heartbeats ("busy") left out: the longest frame.
             own = [m.header.stamp.to_sec() for _, m in window if m.state != "busy"]
             frame_gaps = [b - a for a, b in zip(own, own[1:])]
@@ -436,6 +481,12 @@ class Soak:
             later = [m for t, m in self.status if t >= t_start][faulted[-1] + 1:] if faulted else []
             steps_after_fault = sum(1 for m in later if m.state not in ("fault", "busy"))
             lat = [(t, l) for t, l in self.latency if t_start <= t <= t_end]
+        stamp_gaps = [b - a for a, b in zip(stamps, stamps[1:])]
+        # Each stamp gap over two frames, and the machine's stall within it: the node's part is
+        # the rest.
+        long_stamp_gaps = [{"at_s": round(a - wall_minus_monotonic - t_start, 1), "stamps_apart_s": round(b - a, 3),
+                            "machine_stalled_s": round(machine_stalled(a, b), 3)}
+                           for a, b in zip(stamps, stamps[1:]) if b - a > 2.0 / self.node_rate]
         span = t_end - t_start
         third = span / 3
         early = [l for t, l in lat if t < t_start + third]
@@ -471,8 +522,14 @@ class Soak:
                                                       "max_s": round(max((e - s for s, e in collections), default=0.0), 3)},
             "receiver_core_stalls_over_10ms": {"count": len(stalls),
                                                "max_s": round(max((e - s for s, e in stalls), default=0.0), 3)},
+            "cores_watched": sum(1 for w in watched if w is not None),
+            "core_watch_processor_share": round(self.watch_share, 4),
+            "machine_stalls_over_10ms": {"count": len(machine),
+                                         "max_s": round(max((e - s for s, e in machine), default=0.0), 3),
+                                         "total_s": round(sum(e - s for s, e in machine), 3)},
             "status_max_stamp_gap_s": round(max(stamp_gaps), 3) if stamp_gaps else None,
-            "status_stamp_gaps_over_two_frames": sum(1 for g in stamp_gaps if g > 2.0 / self.node_rate),
+            "status_stamp_gaps_over_two_frames": len(long_stamp_gaps),
+            "status_stamp_gaps_over_two_frames_apart": long_stamp_gaps,
             "status_busy": busy,
             "longest_frame_s": round(max(frame_gaps), 3) if frame_gaps else None,
             "status_steps_skipped": skipped,
@@ -517,14 +574,17 @@ class Soak:
         # Wall-clock checks: judged by the standalone soak (scripts/soak.sh, a quiet pinned
         # machine), reported but not asserted by the 30 s rostest (shared, noisy, or sanitized).
         timing = {
-            # A receiver gap is the node's as far as its stamps were apart and the second status
-            # came late for reasons other than the receiver's own pauses (its core stalled, or it
-            # collected garbage): a status the node stamped and then sent late is the node's.
-            "status gaps <= two frames at the receiver (less its own pauses)": bool(gaps) and all(
-                g["stamps_apart_s"] + max(0.0, g["delivered_late_by_s"] - max(g["receiver_core_stalled_s"],
-                                                                              g["receiver_collecting_garbage_s"]))
+            # A receiver gap is the node's as far as its stamps were apart while the machine ran,
+            # and the second status came late for reasons other than the receiver's own pauses
+            # (its core stalled, or it collected garbage): a status the node stamped and then
+            # sent late is the node's.
+            "status gaps <= two frames at the receiver (less its own pauses and the machine's)": bool(gaps) and all(
+                g["stamps_apart_s"] - g["machine_stalled_between_the_stamps_s"]
+                + max(0.0, g["delivered_late_by_s"] - max(g["receiver_core_stalled_s"],
+                                                          g["receiver_collecting_garbage_s"]))
                 <= 2.0 / self.node_rate for g in long_gaps),
-            "status stamps (when the node published) <= two frames apart": bool(stamp_gaps) and max(stamp_gaps) <= 2.0 / self.node_rate,
+            "status stamps (when the node published) <= two frames apart while the machine ran": bool(stamp_gaps)
+            and all(g["stamps_apart_s"] - g["machine_stalled_s"] <= 2.0 / self.node_rate for g in long_stamp_gaps),
             "frame rate >= 90% of the node's rate (outside the injected delays)": kept >= 0.9 * self.node_rate,
             "no growing queue (late latency <= 2 x early + 0.2 s)": bool(early) and bool(late)
             and np.median(late) <= 2 * np.median(early) + 0.2,
