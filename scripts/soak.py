@@ -13,7 +13,7 @@ and every fifth injection holds a step up for 0.3 s, which the node's heartbeat 
 Reports: messages sent and handled, RSS of the node at start (after a warm-up that lasts until it
 stops growing) and end, status
 messages and the largest gap between them (heartbeats included: state "busy", sent while a frame
-has run half a frame and no status went out for one frame), the longest frame (the largest gap
+has run a quarter of a frame and no status went out for one frame), the longest frame (the largest gap
 between the stamps of the loop's own statuses), the node's simulation frames against the frames
 its rate asks for (dropped frames), pose-to-mesh latency early and late (a growing queue would make it grow), refused
 inputs. Every floating-point field of every message the node publishes on ~status, ~wrench,

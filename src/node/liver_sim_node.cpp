@@ -227,7 +227,7 @@ class LiverSimNode {
   void start_heartbeat() {
     heartbeat_ = std::thread([this] {
       while (!stop_heartbeat_ && ros::ok()) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
         heartbeat();
       }
     });
@@ -768,10 +768,11 @@ class LiverSimNode {
     const ros::WallDuration period(frame_period_);
     // One frame since the last status, counted from that status: from the frame's start, a frame
     // that starts after the loop slept out its slot leaves up to two frames without one. The
-    // frame must have run half a frame, so that a short frame (one that only takes inputs, its
-    // status due at ~publish_rate) is not called busy.
+    // frame must have run a quarter of a frame, so that a short frame (one that only takes
+    // inputs, its status due at ~publish_rate) is not called busy; a longer wait would hold the
+    // status back for it after a frame that started late in its slot.
     if (frame_start_.isZero() || last_status_time_.isZero() || now - last_status_time_ < period ||
-        now - frame_start_ < period * 0.5)
+        now - frame_start_ < period * 0.25)
       return;
     SimulationStatus s = last_status_;
     s.header.stamp = ros::Time::now();
