@@ -706,7 +706,6 @@ class LiverSimNode {
 
   void publish_status(const StepResult& r) {
     SimulationStatus s;
-    s.header.stamp = ros::Time::now();
     s.header.frame_id = frame_id_;
     s.step = steps_;
     const ros::WallTime now = ros::WallTime::now();
@@ -746,13 +745,15 @@ class LiverSimNode {
       fresh_text_.clear();
     }
     {
-      // Published under the heartbeat's lock: it never sends an older step after a newer one.
+      // Stamped and published under the heartbeat's lock: it never sends an older step after a
+      // newer one, nor an earlier stamp after a later one.
       std::lock_guard<std::mutex> lock(status_mutex_);
+      s.header.stamp = ros::Time::now();
+      // When it was stamped, not when the publish returned: the heartbeat keeps the stamps (and
+      // so the arrivals) within a frame of each other, however long sending took.
+      last_status_time_ = ros::WallTime::now();
       status_pub_.publish(s);
       last_status_ = s;
-      // When it was stamped, not when the publish returned: the heartbeat keeps the stamps (and
-      // so the arrivals) within a frame of each other, however long building and sending took.
-      last_status_time_ = now;
       frame_period_ = 1.0 / rate_;
     }
     instruments_->publish(*model_, s.header);
