@@ -441,17 +441,17 @@ class Soak:
         stop.set()
         receiver_stop.set()
         arrivals, collections = receive(arrivals_in, ([], []))
-        stalls = {core: receive(pipe, None) for core, _, pipe in watches}
+        watch_reports = {core: receive(pipe, None) for core, _, pipe in watches}
         receiver.join(5)
         for _, watch, _ in watches:
             watch.join(5)
         for t in threads:
             t.join(5)
         return self.report(pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end, arrivals,
-                           receiver.exitcode, stalls, collections)
+                           receiver.exitcode, watch_reports, collections)
 
     def report(self, pid, sent_start, rejected_start, faults_start, rss_start, rss_end, t_start, t_end, arrivals,
-               receiver_exit, stalls, collections):
+               receiver_exit, watch_reports, collections):
         # Between arrivals at the receiver of its own (receive_status), and between the node's
         # stamps (when it published).
         arrived = [a for a in arrivals if t_start <= a[0] <= t_end]
@@ -459,10 +459,10 @@ class Soak:
         gaps = [b - a for a, b in zip(received, received[1:])]
         # The core watches (watch_core): the receiver's core's stalls, and the machine's (the
         # watched cores' at once; none unless every watch ran, all at the top priority).
-        watches = [stalls.get(core) for core in self.watched_cores]
+        watches = [watch_reports.get(core) for core in self.watched_cores]
         judged = bool(watches) and all(w is not None and w[2] for w in watches)
         machine = common_intervals([w[0] for w in watches]) if judged else []
-        stalls = (stalls.get(receiver_core()) or [[]])[0]
+        stalls = (watch_reports.get(receiver_core()) or [[]])[0]
         # The node stamps on the wall clock; each arrival was noted on both clocks.
         wall_minus_monotonic = (float(np.median([wall - mono for mono, wall, _ in arrivals])) if arrivals
                                 else time.time() - time.monotonic())
