@@ -23,13 +23,13 @@ build() {  # target sources... [libraries]
     clang++ "${FLAGS[@]}" "$@" -o "$OUT/$target"
   fi
 }
-build fuzz_mesh "$REPO/test/fuzz/fuzz_mesh.cpp" "$REPO/src/core/mesh.cpp" "$REPO/src/core/mesh_io.cpp"
-build fuzz_vessel "$REPO/test/fuzz/fuzz_vessel.cpp" "$REPO/src/core/vessel_tree.cpp" "$REPO/src/core/vtk_polydata.cpp" \
+build fuzz_mesh "$REPO/test/fuzz/fuzz_mesh.cpp" "$REPO/src/core/geometry/mesh.cpp" "$REPO/src/core/io/mesh_io.cpp"
+build fuzz_vessel "$REPO/test/fuzz/fuzz_vessel.cpp" "$REPO/src/core/geometry/vessel_tree.cpp" "$REPO/src/core/io/vessel_io.cpp" "$REPO/src/core/io/vtk_polydata.cpp" \
   -lyaml-cpp
-build fuzz_scene "$REPO/test/fuzz/fuzz_scene.cpp" "$REPO/src/core/scene.cpp" "$REPO/src/core/options.cpp" \
-  "$REPO/src/core/region.cpp" -lyaml-cpp
-build fuzz_surface "$REPO/test/fuzz/fuzz_surface.cpp" "$REPO/src/core/surface_io.cpp" "$REPO/src/core/vtk_polydata.cpp" \
-  "$REPO/src/core/surface_repair.cpp"
+build fuzz_scene "$REPO/test/fuzz/fuzz_scene.cpp" "$REPO/src/core/scene/scene.cpp" "$REPO/src/core/scene/options.cpp" \
+  "$REPO/src/core/geometry/region.cpp" -lyaml-cpp
+build fuzz_surface "$REPO/test/fuzz/fuzz_surface.cpp" "$REPO/src/core/io/surface_io.cpp" "$REPO/src/core/io/vtk_polydata.cpp" \
+  "$REPO/src/core/meshing/surface_repair.cpp"
 for target in fuzz_mesh fuzz_vessel fuzz_scene fuzz_surface; do
   corpus="$OUT/corpus_${target#fuzz_}"
   [ "$DESCRIPTION" = smoke ] && corpus="$OUT/smoke_${target#fuzz_}" && rm -rf "$corpus"

@@ -22,7 +22,7 @@
 
 #include "liver_sim/InstrumentCommand.h"
 #include "liver_sim/SimulationStatus.h"
-#include "liver_sim/liver_model.h"
+#include "liver_sim/simulation/liver_model.h"
 #include "wait_for.h"
 
 namespace {

@@ -10,7 +10,7 @@
 #include <functional>
 
 #include "liver_sim/SimulationStatus.h"
-#include "liver_sim/liver_model.h"
+#include "liver_sim/simulation/liver_model.h"
 #include "wait_for.h"
 
 namespace {

@@ -1,7 +1,7 @@
 // Shared by the core tests: region shorthands.
 #pragma once
 
-#include "liver_sim/region.h"
+#include "liver_sim/geometry/region.h"
 
 namespace liver_sim {
 

@@ -21,7 +21,7 @@
 
 #include "liver_sim/SimulationStatus.h"
 #include "liver_sim/TargetCovariances.h"
-#include "liver_sim/registration.h"
+#include "liver_sim/registration/registration.h"
 #include "scenarios.h"
 #include "wait_for.h"
 

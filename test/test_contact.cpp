@@ -9,9 +9,9 @@
 #include <random>
 #include <thread>
 
-#include "liver_sim/closest_points.h"
-#include "liver_sim/contact_solver.h"
-#include "liver_sim/liver_model.h"
+#include "liver_sim/geometry/closest_points.h"
+#include "liver_sim/contact/contact_solver.h"
+#include "liver_sim/simulation/liver_model.h"
 #include "regions.h"
 
 namespace liver_sim {

@@ -6,9 +6,9 @@
 #include <array>
 #include <random>
 
-#include "liver_sim/corotational_tetra.h"
-#include "liver_sim/membrane_cst.h"
-#include "liver_sim/mesh.h"
+#include "liver_sim/model/corotational_tetra.h"
+#include "liver_sim/model/membrane_cst.h"
+#include "liver_sim/geometry/mesh.h"
 
 namespace liver_sim {
 namespace {

@@ -8,7 +8,8 @@
 #include <fstream>
 #include <map>
 
-#include "liver_sim/mesh.h"
+#include "liver_sim/geometry/mesh.h"
+#include "liver_sim/io/mesh_io.h"
 
 namespace liver_sim {
 namespace {

@@ -7,7 +7,7 @@
 #include <set>
 
 #include "../src/node/mesh_marker.h"
-#include "liver_sim/mesh.h"
+#include "liver_sim/geometry/mesh.h"
 #include "regions.h"
 
 namespace liver_sim {

@@ -7,7 +7,8 @@
 #include <cmath>
 #include <fstream>
 
-#include "liver_sim/liver_model.h"
+#include "liver_sim/io/mesh_io.h"
+#include "liver_sim/simulation/liver_model.h"
 #include "regions.h"
 
 namespace liver_sim {

@@ -11,8 +11,8 @@
 #include <cstdio>
 #include <limits>
 
-#include "liver_sim/corotational_beam.h"
-#include "liver_sim/liver_model.h"
+#include "liver_sim/model/corotational_beam.h"
+#include "liver_sim/simulation/liver_model.h"
 #include "regions.h"
 
 namespace liver_sim {
@@ -338,7 +338,7 @@ TEST(Rollback, FullNewtonStepsWithoutLineSearchBlowUp) {
   const Eigen::VectorXd rest = m.positions();
   const StepResult r = expect_rolled_back(m, "residual blow-up");
   ASSERT_GE(r.iterations, 2);
-  MechanicalModel mechanics(load_scene_mesh(s), s);
+  MechanicalModel mechanics(load_scene_mesh(s), s, load_vessel_trees(s));
   auto static_residual = [&](const Eigen::VectorXd& x) {
     Eigen::VectorXd f_int, f;
     mechanics.internal_forces(x, f_int);

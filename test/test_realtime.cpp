@@ -8,8 +8,8 @@
 #include <cstdlib>
 #include <string>
 
-#include "liver_sim/frame_clock.h"
-#include "liver_sim/liver_model.h"
+#include "liver_sim/runtime/frame_clock.h"
+#include "liver_sim/simulation/liver_model.h"
 
 // A sanitizer brings its own malloc, which this one would bypass.
 #if defined(__has_feature)

@@ -9,7 +9,7 @@
 
 #include <random>
 
-#include "liver_sim/registration.h"
+#include "liver_sim/registration/registration.h"
 #include "scenarios.h"
 #include "regions.h"
 

@@ -13,10 +13,10 @@
 #include <thread>
 
 #include "depth_camera.h"
-#include "liver_sim/closest_points.h"
-#include "liver_sim/registration.h"
-#include "liver_sim/target_uncertainty.h"
-#include "liver_sim/uncertainty_worker.h"
+#include "liver_sim/geometry/closest_points.h"
+#include "liver_sim/registration/registration.h"
+#include "liver_sim/registration/target_uncertainty.h"
+#include "liver_sim/registration/uncertainty_worker.h"
 #include "regions.h"
 #include "scenarios.h"
 

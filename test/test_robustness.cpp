@@ -10,10 +10,10 @@
 #include <new>
 #include <stdexcept>
 
-#include "liver_sim/liver_model.h"
-#include "liver_sim/mesh.h"
-#include "liver_sim/registration.h"
-#include "liver_sim/step_guard.h"
+#include "liver_sim/simulation/liver_model.h"
+#include "liver_sim/geometry/mesh.h"
+#include "liver_sim/registration/registration.h"
+#include "liver_sim/simulation/step_guard.h"
 
 namespace liver_sim {
 namespace {

@@ -5,7 +5,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "liver_sim/scene.h"
+#include "liver_sim/scene/scene.h"
 
 namespace liver_sim {
 namespace {

@@ -7,13 +7,13 @@
 #include <random>
 #include <thread>
 
-#include "liver_sim/background_factorization.h"
-#include "liver_sim/cholmod_solver.h"
-#include "liver_sim/corotational_tetra.h"
-#include "liver_sim/gmres.h"
-#include "liver_sim/mesh.h"
-#include "liver_sim/node_compliance.h"
-#include "liver_sim/sparse_pattern.h"
+#include "liver_sim/linalg/background_factorization.h"
+#include "liver_sim/linalg/cholmod_solver.h"
+#include "liver_sim/model/corotational_tetra.h"
+#include "liver_sim/linalg/gmres.h"
+#include "liver_sim/geometry/mesh.h"
+#include "liver_sim/contact/node_compliance.h"
+#include "liver_sim/linalg/sparse_pattern.h"
 
 namespace liver_sim {
 namespace {

@@ -14,13 +14,16 @@
 #include <set>
 #include <sstream>
 
-#include "liver_sim/anatomy.h"
-#include "liver_sim/liver_model.h"
-#include "liver_sim/mesh_quality.h"
-#include "liver_sim/surface_deviation.h"
-#include "liver_sim/surface_repair.h"
-#include "liver_sim/vessel_tree.h"
-#include "liver_sim/volume_mesher.h"
+#include "liver_sim/geometry/mesh_quality.h"
+#include "liver_sim/geometry/vessel_tree.h"
+#include "liver_sim/io/mesh_io.h"
+#include "liver_sim/io/surface_io.h"
+#include "liver_sim/io/vessel_io.h"
+#include "liver_sim/meshing/anatomy.h"
+#include "liver_sim/meshing/surface_deviation.h"
+#include "liver_sim/meshing/surface_repair.h"
+#include "liver_sim/meshing/volume_mesher.h"
+#include "liver_sim/simulation/liver_model.h"
 
 namespace liver_sim {
 namespace {

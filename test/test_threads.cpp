@@ -15,8 +15,8 @@
 #include <thread>
 #include <vector>
 
-#include "liver_sim/liver_model.h"
-#include "liver_sim/worker_pool.h"
+#include "liver_sim/simulation/liver_model.h"
+#include "liver_sim/runtime/worker_pool.h"
 
 namespace liver_sim {
 namespace {

@@ -8,10 +8,11 @@
 #include <fstream>
 #include <sstream>
 
-#include "liver_sim/corotational_beam.h"
-#include "liver_sim/liver_model.h"
+#include "liver_sim/model/corotational_beam.h"
+#include "liver_sim/simulation/liver_model.h"
 #include "regions.h"
-#include "liver_sim/vessel_tree.h"
+#include "liver_sim/geometry/vessel_tree.h"
+#include "liver_sim/io/vessel_io.h"
 
 namespace liver_sim {
 namespace {

@@ -9,8 +9,8 @@
 #include <Eigen/Geometry>
 #include <vector>
 
-#include "liver_sim/liver_model.h"
-#include "liver_sim/registration.h"
+#include "liver_sim/simulation/liver_model.h"
+#include "liver_sim/registration/registration.h"
 
 namespace liver_sim {
 

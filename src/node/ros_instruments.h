@@ -19,7 +19,7 @@
 
 #include "liver_sim/InstrumentCommand.h"
 #include "liver_sim/SimulationStatus.h"
-#include "liver_sim/liver_model.h"
+#include "liver_sim/simulation/liver_model.h"
 
 namespace liver_sim {
 

@@ -12,8 +12,8 @@
 #include <vector>
 
 #include "depth_camera.h"
-#include "liver_sim/mesh.h"
-#include "liver_sim/options.h"
+#include "liver_sim/geometry/mesh.h"
+#include "liver_sim/scene/options.h"
 
 namespace liver_sim {
 

@@ -32,9 +32,9 @@
 #include <thread>
 #include <vector>
 
-#include "liver_sim/frame_clock.h"
-#include "liver_sim/liver_model.h"
-#include "liver_sim/worker_pool.h"
+#include "liver_sim/runtime/frame_clock.h"
+#include "liver_sim/simulation/liver_model.h"
+#include "liver_sim/runtime/worker_pool.h"
 
 namespace {
 

@@ -32,7 +32,7 @@
 #include <utility>
 #include <vector>
 
-#include "liver_sim/liver_model.h"
+#include "liver_sim/simulation/liver_model.h"
 #include "json_text.h"
 
 namespace {

@@ -34,9 +34,9 @@
 #include <vector>
 
 #include "depth_camera.h"
-#include "liver_sim/liver_model.h"
-#include "liver_sim/registration.h"
-#include "liver_sim/target_uncertainty.h"
+#include "liver_sim/simulation/liver_model.h"
+#include "liver_sim/registration/registration.h"
+#include "liver_sim/registration/target_uncertainty.h"
 #include "scenarios.h"
 
 namespace {

@@ -13,9 +13,9 @@
 #include <string>
 #include <vector>
 
-#include "liver_sim/liver_model.h"
+#include "liver_sim/simulation/liver_model.h"
 #include "json_text.h"
-#include "liver_sim/vtu_writer.h"
+#include "liver_sim/io/vtu_writer.h"
 
 namespace {
 

@@ -22,7 +22,7 @@
 #include <tuple>
 #include <vector>
 
-#include "liver_sim/liver_model.h"
+#include "liver_sim/simulation/liver_model.h"
 
 namespace {
 

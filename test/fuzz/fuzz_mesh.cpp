@@ -3,7 +3,8 @@
 #include <sstream>
 #include <string>
 
-#include "liver_sim/mesh.h"
+#include "liver_sim/geometry/mesh.h"
+#include "liver_sim/io/mesh_io.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::istringstream in(std::string(reinterpret_cast<const char*>(data), size));

@@ -2,7 +2,7 @@
 #include <cstdint>
 #include <string>
 
-#include "liver_sim/scene.h"
+#include "liver_sim/scene/scene.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   try {

@@ -3,7 +3,8 @@
 #include <cstdint>
 #include <string>
 
-#include "liver_sim/surface_repair.h"
+#include "liver_sim/io/surface_io.h"
+#include "liver_sim/meshing/surface_repair.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string bytes(reinterpret_cast<const char*>(data), size);

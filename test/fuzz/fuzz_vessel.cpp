@@ -3,7 +3,8 @@
 #include <sstream>
 #include <string>
 
-#include "liver_sim/vessel_tree.h"
+#include "liver_sim/geometry/vessel_tree.h"
+#include "liver_sim/io/vessel_io.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string text(reinterpret_cast<const char*>(data), size);

@@ -1,0 +1,38 @@
+// Tetrahedral meshing of a closed surface with gmsh's library (libgmsh): the surface is
+// re-meshed at the target size (gmsh classifies it into patches that it can parametrise, then
+// meshes them: a 500k-triangle segmentation becomes a few thousand boundary triangles on the same
+// shape), then the volume is filled (Delaunay, optimised). Deterministic: one thread, fixed
+// options and random seed, so the same surface gives the same mesh bit for bit.
+// Built into liver_sim_mesher, not the core: the node and the simulator do not link gmsh.
+#pragma once
+
+#include <functional>
+#include <string>
+
+#include "liver_sim/geometry/mesh.h"
+#include "liver_sim/geometry/surface_mesh.h"
+
+namespace liver_sim {
+
+struct VolumeMeshOptions {
+  double element_size = 0;      // m, target edge length, > 0; <= 0: chosen for target_elements
+  int target_elements = 10000;  // tetrahedra wanted when element_size <= 0 (about: within 15% when reached)
+  double feature_angle = 40;    // degrees: surface creases sharper than this stay edges of the mesh
+  double max_deviation = 0.5e-3;  // m, > 0: edges on curved parts shortened (down to a quarter of the
+                                  // size) so that they bulge at most this far from the surface
+  std::function<void(const std::string&)> progress;  // one line per stage, e.g. "meshing volume"
+};
+
+struct VolumeMeshReport {
+  double element_size = 0;  // m, the size the final pass used
+  int passes = 0;           // volume meshings (more when one missed the count or failed)
+  bool curvature_sizing = true;  // false: gmsh failed with it and the mesh has a uniform size
+};
+
+// `surface`: closed, manifold, outward-oriented, in metres (repair_surface's output). Returns
+// positively oriented tetrahedra (checked). Throws MeshError naming `origin` with gmsh's message when gmsh
+// fails.
+TetMesh mesh_volume(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
+                    VolumeMeshReport* report = nullptr);
+
+}  // namespace liver_sim
