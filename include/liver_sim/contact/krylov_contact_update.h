@@ -35,6 +35,10 @@ class KrylovContactUpdate {
     Eigen::Vector3d force;   // the force per unit unknown at the point
     double target;
   };
+  // The unknowns of the contact state that the contact problem's forces (contact frames) decide:
+  // sticking and held contacts three, sliding ones one, separating ones none.
+  void choose_unknowns(const std::vector<SurfaceContact>& contacts, const Eigen::VectorXd& lambda, double friction);
+
   std::vector<Unknown> unknowns_;
   Eigen::MatrixXd schur_;
   // Points close together on few nodes (a shaft lying along a face) make dependent rows: the

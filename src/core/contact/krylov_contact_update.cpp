@@ -7,12 +7,9 @@ constexpr int kMaxKrylov = 30;  // GMRES iterations per Newton update
 
 }  // namespace
 
-int KrylovContactUpdate::solve(std::vector<SurfaceContact>& contacts, ContactProblem& problem,
-                               const MechanicalModel& mechanics, double friction, CholmodSolver& factor,
-                               const Gmres::Operator& jacobian, const Eigen::VectorXd& r, double forcing,
-                               Eigen::VectorXd& dx) {
+void KrylovContactUpdate::choose_unknowns(const std::vector<SurfaceContact>& contacts, const Eigen::VectorXd& lambda_all,
+                                          double friction) {
   unknowns_.clear();
-  const Eigen::VectorXd& lambda_all = problem.lambda();
   const int m = static_cast<int>(contacts.size());
   for (int c = 0; c < m; ++c) {
     const SurfaceContact& contact = contacts[c];
@@ -26,6 +23,13 @@ int KrylovContactUpdate::solve(std::vector<SurfaceContact>& contacts, ContactPro
       unknowns_.push_back({c, contact.frame.col(0), direction, -contact.rows[0]});
     }
   }
+}
+
+int KrylovContactUpdate::solve(std::vector<SurfaceContact>& contacts, ContactProblem& problem,
+                               const MechanicalModel& mechanics, double friction, CholmodSolver& factor,
+                               const Gmres::Operator& jacobian, const Eigen::VectorXd& r, double forcing,
+                               Eigen::VectorXd& dx) {
+  choose_unknowns(contacts, problem.lambda(), friction);
   const int k = static_cast<int>(unknowns_.size());
   const std::vector<char>& fixed = mechanics.fixed_dofs();
   // The point's motion or force through its free nodes.
