@@ -29,8 +29,8 @@ struct FrameTime {
   double wall = 0;
 };
 
-// Declares, changes or removes a named instrument (as liver_sim/InstrumentCommand.msg).
-struct InstrumentCommand {
+// Declares, changes or removes a named instrument (the fields of liver_sim/InstrumentCommand.msg).
+struct InstrumentRequest {
   std::string name;   // 1 to 32 letters, digits or '_'
   std::string type;   // probe, shaft, tube or grasper: declares it (anew); empty: changes a declared one
   std::string frame;  // where its poses come from: empty its own pose stream, else a frame the

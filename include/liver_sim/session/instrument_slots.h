@@ -42,7 +42,7 @@ class InstrumentSlots {
 
   // Any thread. A command or a pose, validated and staged (a refusal goes to the notices);
   // `command` returns whether it was accepted.
-  bool command(const InstrumentCommand& c);
+  bool command(const InstrumentRequest& c);
   void pose(const InstrumentPose& p);
   void frame_pose(const FramePose& p, Stamp now);
   void set_staleness(double pose_timeout, bool hold_stale);
@@ -83,7 +83,7 @@ class InstrumentSlots {
   };
 
   // A declaration or change merged into `shape`: "" or the refusal naming the field.
-  std::string merge(const InstrumentCommand& c, InstrumentOptions& shape) const;
+  std::string merge(const InstrumentRequest& c, InstrumentOptions& shape) const;
   // The model's instrument for `shape`: the one of its name, or of its name and type when it
   // once had another type (the model keeps an instrument's type for life).
   static int model_slot(const LiverModel& model, const InstrumentOptions& shape);

@@ -22,8 +22,9 @@ class Notices {
 
   uint32_t refused() const;             // since construction
   std::string last_refusal() const;
-  // The text of the refusals and events since the last call (the last one of them), once.
-  std::string take_fresh();
+  // The text of the refusals and events since the last call (the last one of them), once, and
+  // the refusals counted with it.
+  std::string take_fresh(uint32_t* refused = nullptr);
 
  private:
   Sink sink_;

@@ -71,7 +71,7 @@ class TrackingSession {
   TrackingSession(TetMesh mesh, const Scene& scene, SessionOptions options, Notices::Sink sink = nullptr);
 
   // --- Any thread: the latest input of each kind, applied at the start of the next frame.
-  bool submit(const InstrumentCommand& c) { return slots_.command(c); }  // false: refused
+  bool submit(const InstrumentRequest& c) { return slots_.command(c); }  // false: refused
   void submit(const InstrumentPose& p) { slots_.pose(p); }
   void submit(const FramePose& p) { slots_.frame_pose(p, options_.clock().stamp); }
   void submit(Cloud cloud);

@@ -88,7 +88,7 @@ void InstrumentSlots::refuse(std::unique_lock<std::mutex>& lock, const std::stri
   notices_.refuse(why);
 }
 
-std::string InstrumentSlots::merge(const InstrumentCommand& c, InstrumentOptions& shape) const {
+std::string InstrumentSlots::merge(const InstrumentRequest& c, InstrumentOptions& shape) const {
   using Type = InstrumentOptions::Type;
   const std::string k = "instrument_command " + c.name + ": ";
   if (!c.type.empty()) {
@@ -118,7 +118,7 @@ std::string InstrumentSlots::merge(const InstrumentCommand& c, InstrumentOptions
   return error.empty() ? "" : k + error;
 }
 
-bool InstrumentSlots::command(const InstrumentCommand& c) {
+bool InstrumentSlots::command(const InstrumentRequest& c) {
   std::string error = instrument_name_error(c.name);
   if (!error.empty()) {
     notices_.refuse("instrument_command: " + error);

@@ -29,8 +29,9 @@ std::string Notices::last_refusal() const {
   return last_refusal_;
 }
 
-std::string Notices::take_fresh() {
+std::string Notices::take_fresh(uint32_t* refused) {
   std::lock_guard<std::mutex> lock(mutex_);
+  if (refused) *refused = refused_;
   std::string fresh;
   fresh.swap(fresh_);
   return fresh;
