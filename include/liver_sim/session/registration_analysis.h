@@ -35,7 +35,7 @@ class RegistrationAnalysis {
     int support_held = -1;       // the candidate support newly held, or -1
     std::string error;           // why there are no covariances (a failed analysis, one that could not start)
     std::string estimate_error;  // why there are no estimates
-    double cpu_time = 0;         // s of processor time the analysis took (its thread's)
+    double cpu_time = 0;         // s of processor time the analysis took (the worker's thread's; in frame, the process's)
     double wall_time = 0;        // s, in frame only
   };
 
