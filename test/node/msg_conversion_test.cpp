@@ -9,7 +9,7 @@ namespace liver_sim {
 namespace {
 
 TEST(MsgConversion, StampsRoundTripToTheNanosecond) {
-  // Mutation seen failing: a stamp carried as seconds in a double (1.7e9 s keeps 0.24 us).
+  // Guards against: a stamp carried as seconds in a double (1.7e9 s keeps 0.24 us).
   for (const ros::Time t : {ros::Time(1700000000, 123456789), ros::Time(1, 1), ros::Time(0, 0)})
     EXPECT_EQ(to_time(to_stamp(t)), t) << t;
 }
@@ -32,7 +32,7 @@ TEST(MsgConversion, TransformsAndPosesRoundTrip) {
 }
 
 TEST(MsgConversion, PosesAreRefusedForWhatTheyLack) {
-  // Mutations seen failing: the unset orientation refused; a NaN let through.
+  // Guards against: the unset orientation refused; a NaN let through.
   geometry_msgs::Pose p;
   EXPECT_EQ(pose_error(p), "");  // zeros: the identity
   EXPECT_EQ(p.orientation.w, 1.0);

@@ -9,7 +9,7 @@ namespace liver_sim {
 namespace {
 
 TEST(NodeOptions, EachValueBeyondItsBoundsIsRefusedByName) {
-  // Mutations seen failing: the rate's upper bound dropped; NaN let through by a "v < lo" test.
+  // Guards against: the rate's upper bound dropped; NaN let through by a "v < lo" test.
   const NodeOptions valid;
   EXPECT_EQ(options_error(valid), "");
   const std::vector<std::pair<std::function<void(NodeOptions&)>, std::string>> cases = {
@@ -56,7 +56,7 @@ TEST(NodeOptions, SchedulingIsCheckedAgainstTheProcessorsAllowed) {
 }
 
 TEST(NodeOptions, ScalarsBecomeSceneValuesExactly) {
-  // 17 digits: a double comes back to the same bits (mutation seen failing: the stream's 6).
+  // 17 digits: a double comes back to the same bits (6, the stream's default, would not).
   EXPECT_EQ(scalar_text(XmlRpc::XmlRpcValue(0.1)), "0.10000000000000001");
   EXPECT_EQ(std::stod(scalar_text(XmlRpc::XmlRpcValue(1.0 / 3))), 1.0 / 3);
   EXPECT_EQ(scalar_text(XmlRpc::XmlRpcValue(true)), "true");

@@ -53,7 +53,7 @@ Scene probe_cube() {
 TEST(TrackingSession, RegistersTheLatestCloudAsTheDirectCompositionDoes) {
   // Two clouds before a frame: the frame registers the second alone, to the same bits as the
   // model and registration composed by hand; the analysis in frame equals the hand-made
-  // sequence (factorise, covariances, supports, stiffness, hidden loads). Mutations seen failing:
+  // sequence (factorise, covariances, supports, stiffness, hidden loads). Guards against:
   // clouds queued (the first registered); the covariances made after the estimates.
   Phantom p;
   const pcl::PointCloud<pcl::PointXYZ> first = p.cloud(2.0, 1), second = p.cloud(5.0, 2);
@@ -91,7 +91,7 @@ TEST(TrackingSession, RegistersTheLatestCloudAsTheDirectCompositionDoes) {
 TEST(TrackingSession, TheBackgroundAnalysisDescribesTheStateItWasHanded) {
   // The same cloud in two sessions: the covariances the worker's thread made on its own model
   // (adopted at a later frame) are those made in frame on the session's model, to rounding.
-  // Mutation seen failing: the analysis started before the cloud's step (the rest state's).
+  // Guards against: the analysis started before the cloud's step (the rest state's).
   Phantom p;
   const pcl::PointCloud<pcl::PointXYZ> cloud = p.cloud(5.0, 3);
   SessionOptions in_frame;
@@ -119,7 +119,7 @@ TEST(TrackingSession, TheBackgroundAnalysisDescribesTheStateItWasHanded) {
 TEST(TrackingSession, NamedInstrumentsTakeSlotsGoStaleAndAreReleasedOnReset) {
   // A probe declared and posed: in the model at its pose; retyped: another slot, the old one out
   // of the scene; a pose older than the timeout: withdrawn and told (held when asked); a reset:
-  // back to the rest shape, out until the next pose. Mutations seen failing: a retyped
+  // back to the rest shape, out until the next pose. Guards against: a retyped
   // instrument updated in its old slot (the model refuses the type change); staleness counted
   // from the pose's own stamp; a reset that keeps the instruments in the scene.
   TestClock clock;
@@ -175,7 +175,7 @@ TEST(TrackingSession, NamedInstrumentsTakeSlotsGoStaleAndAreReleasedOnReset) {
 
 TEST(TrackingSession, RefusedInputsAreCountedAndChangeNothing) {
   // A capsule out of bounds, an unknown instrument's change, a pose the shape refuses, live
-  // options the model refuses: each counted, the model as it was. Mutations seen failing: a
+  // options the model refuses: each counted, the model as it was. Guards against: a
   // refused live change that keeps the parts applied before the refusal.
   const Scene scene = probe_cube();
   TrackingSession session(load_scene_mesh(scene), scene, SessionOptions());
@@ -203,9 +203,9 @@ TEST(TrackingSession, RefusedInputsAreCountedAndChangeNothing) {
   EXPECT_TRUE(same_bits(session.model().observable_state(), before));
 }
 
-TEST(TrackingSession, AFaultKeepsTheLastGoodStateAndTheNextFrameRetries) {
+TEST(TrackingSession, AFaultKeepsTheLastGoodStateAndAsksTheNextFrameToStep) {
   // The barrier's test hook at every step: the state says fault, the model is the one before,
-  // the fault is counted; without the hook the next frame steps again. Mutation seen failing: a
+  // the fault is counted and the next frame is asked to step again. Guards against: a
   // faulted frame that does not ask the next one to step (the model never settles).
   Scene scene = load_scene(source("config/scenes/aspiration_cube.yaml"));  // suction: the step iterates
   scene.mesh.box_divisions = Eigen::Vector3i(4, 4, 4);
