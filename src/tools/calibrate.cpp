@@ -10,8 +10,9 @@
 //   stage,load_scale,probe,ux,uy,uz     stage: parenchyma (no capsule) | capsule; u in m
 // A load level s runs the scene's static increments up to s times its loads, from the rest shape.
 // Each modulus is found by a 1-D search in ln E (bracketed by expanding steps from the start,
-// then Brent's method to 1e-5 in ln E) minimising the mean squared displacement misfit; a solve
-// that does not converge counts as an infinite misfit. Start values default to the scene's moduli.
+// then Brent's method, Boost.Math's, to about 1e-5 in ln E: 2^-20 relative in ln(E / 1 Pa))
+// minimising the mean squared displacement misfit; a solve that does not converge counts as a
+// misfit above any other. Start values default to the scene's moduli.
 // Progress (one line per model evaluation) goes to standard error, one JSON object to standard
 // output. Exit status: 0 fitted, 1 bad input (one line naming the file or key), 2 bad command
 // line, 3 the fit failed (a stage with no converged evaluation, no minimum within a factor 1e6
@@ -19,6 +20,7 @@
 // --tolerance, relative, from its --expect-* value) or, with --synthesize, a solve failed.
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <fstream>
 #include <functional>
@@ -31,6 +33,8 @@
 #include <string>
 #include <utility>
 #include <vector>
+
+#include <boost/math/tools/minima.hpp>
 
 #include "liver_sim/simulation/liver_model.h"
 #include "tool_io.h"
@@ -251,12 +255,18 @@ double mean_square_misfit(const StageData& data, const Displacements& u) {
   return sum / data.readings.size();
 }
 
-// Search in x = ln E: the first step, the growth of the bracketing steps, how far from the start
-// the bracket may reach, and the final tolerance (relative in E).
+// Search in x = ln E: the first step, the growth of the bracketing steps and how far from the
+// start the bracket may reach; Brent's method stops within 2^(1 - kBits) |x| + 2^(-1 - kBits) of
+// the minimum (about 1e-5 in ln E, relative in E, for moduli of kPa to MPa), after at most
+// kMaxIterations steps.
 constexpr double kFirstStep = 0.6931471805599453;  // ln 2
 constexpr double kGrowth = 1.618033988749895;      // golden ratio
 constexpr double kReach = 13.815510557964274;      // ln 1e6
-constexpr double kTolerance = 1e-5;
+constexpr int kBits = 21;
+constexpr std::uintmax_t kMaxIterations = 100;
+// Boost's parabolic steps need finite values: a failed solve's misfit (infinite) enters them as
+// this, above any misfit (m^2) and small enough that their products of it stay finite.
+constexpr double kFailedMisfit = 1e300;
 
 struct Minimum {
   double x = 0;
@@ -264,61 +274,19 @@ struct Minimum {
   std::string failure;  // "" when a minimum was bracketed and refined
 };
 
-// Brent's method (parabolic steps, golden section when they are not trusted) on the bracket
-// a < b < c or c < b < a with f(b) below f(a) and f(c), all three given. Infinite values (failed
-// solves) only ever take golden-section steps. A minimum whose final bracket still ends on a
-// failed solve lies on the edge of convergence, not at a fit, and is reported as a failure.
-Minimum brent(double a, double b, double c, double fa, double fb, double fc,
-              const std::function<double(double)>& f) {
-  const double golden = 0.3819660112501051;  // 2 - golden ratio
-  double lo = a, hi = c, flo = fa, fhi = fc;
-  if (lo > hi) std::swap(lo, hi), std::swap(flo, fhi);
-  double x = b, w = b, v = b, fx = fb, fw = fb, fv = fb;
-  double d = 0, e = 0;  // the last step and the one before
-  for (;;) {
-    const double mid = 0.5 * (lo + hi), tol2 = 2 * kTolerance;
-    if (std::abs(x - mid) <= tol2 - 0.5 * (hi - lo))
-      return {x, fx, std::isfinite(flo) && std::isfinite(fhi) ? "" : "the minimum borders on a failed solve"};
-    bool parabolic = false;
-    if (std::abs(e) > kTolerance && std::isfinite(fx) && std::isfinite(fw) && std::isfinite(fv)) {
-      double r = (x - w) * (fx - fv), q = (x - v) * (fx - fw), p = (x - v) * q - (x - w) * r;
-      q = 2 * (q - r);
-      if (q > 0) p = -p;
-      q = std::abs(q);
-      // Accepted when it falls inside the bracket and moves less than half the step before last.
-      if (std::abs(p) < std::abs(0.5 * q * e) && p > q * (lo - x) && p < q * (hi - x)) {
-        e = d;
-        d = p / q;
-        if (x + d - lo < tol2 || hi - (x + d) < tol2) d = std::copysign(kTolerance, mid - x);
-        parabolic = true;
-      }
-    }
-    if (!parabolic) {
-      e = x >= mid ? lo - x : hi - x;
-      d = golden * e;
-    }
-    const double u = std::abs(d) >= kTolerance ? x + d : x + std::copysign(kTolerance, d);
-    const double fu = f(u);
-    if (fu <= fx) {
-      if (u >= x) lo = x, flo = fx;
-      else hi = x, fhi = fx;
-      v = w, fv = fw, w = x, fw = fx, x = u, fx = fu;
-    } else {
-      if (u < x) lo = u, flo = fu;
-      else hi = u, fhi = fu;
-      if (fu <= fw || w == x) {
-        v = w, fv = fw, w = u, fw = fu;
-      } else if (fu <= fv || v == x || v == w) {
-        v = u, fv = fu;
-      }
-    }
-  }
-}
-
 // Minimises f over x within kReach of x0: walks downhill with growing steps until f rises on
-// both sides, then refines with Brent's method. A start whose solve fails is first replaced by
-// the nearest converged point on either side.
-Minimum minimize(double x0, const std::function<double(double)>& f) {
+// both sides, then refines the bracket with Brent's method (Boost.Math). A start whose solve
+// fails is first replaced by the nearest converged point on either side. Each x is solved once.
+// A minimum next to a failed solve (the nearest point tried on either side; Brent's final
+// bracket ends on them) lies on the edge of convergence, not at a fit, and is reported as a
+// failure.
+Minimum minimize(double x0, const std::function<double(double)>& misfit) {
+  std::map<double, double> tried;  // x -> f(x)
+  auto f = [&](double x) {
+    const auto [at, fresh] = tried.try_emplace(x, 0.0);
+    if (fresh) at->second = misfit(x);
+    return at->second;
+  };
   double a = x0, fa = f(a);
   for (double step = kFirstStep; !std::isfinite(fa) && step <= kReach; step *= kGrowth)
     for (double side : {step, -step})
@@ -326,13 +294,26 @@ Minimum minimize(double x0, const std::function<double(double)>& f) {
   if (!std::isfinite(fa)) return {x0, fa, "no converged solve within a factor 1e6 of the start"};
   double b = a + kFirstStep, fb = f(b);
   if (fb > fa) std::swap(a, b), std::swap(fa, fb);
+  double c;
   for (;;) {
-    const double c = std::clamp(b + kGrowth * (b - a), x0 - kReach, x0 + kReach);
+    c = std::clamp(b + kGrowth * (b - a), x0 - kReach, x0 + kReach);
     if (c == b) return {b, fb, "the misfit still falls a factor 1e6 from the start"};
-    const double fc = f(c);
-    if (fc > fb) return brent(a, b, c, fa, fb, fc, f);
-    a = b, fa = fb, b = c, fb = fc;
+    if (f(c) > fb) break;
+    a = b, b = c, fb = f(c);
   }
+  std::uintmax_t iterations = kMaxIterations;
+  const double x = boost::math::tools::brent_find_minima(
+                       [&](double x) {
+                         const double fx = f(x);
+                         return std::isfinite(fx) ? fx : kFailedMisfit;
+                       },
+                       std::min(a, c), std::max(a, c), kBits, iterations)
+                       .first;
+  if (iterations >= kMaxIterations) return {x, f(x), "Brent's method did not converge"};
+  const auto at = tried.find(x), right = std::next(at);
+  const bool bordered = (at != tried.begin() && !std::isfinite(std::prev(at)->second)) ||
+                        (right != tried.end() && !std::isfinite(right->second));
+  return {x, f(x), bordered ? "the minimum borders on a failed solve" : ""};
 }
 
 struct StageFit {
