@@ -11,8 +11,9 @@
 // A load level s runs the scene's static increments up to s times its loads, from the rest shape.
 // Each modulus is found by a 1-D search in ln E (bracketed by expanding steps from the start,
 // then Brent's method, Boost.Math's, to about 1e-5 in ln E: 2^-20 relative in ln(E / 1 Pa))
-// minimising the mean squared displacement misfit; a solve that does not converge counts as a
-// misfit above any other. Start values default to the scene's moduli.
+// minimising the mean squared displacement misfit; a solve that does not converge, or a modulus
+// outside the model's bounds, counts as a misfit above any other (a failed solve). Start values
+// default to the scene's moduli.
 // Progress (one line per model evaluation) goes to standard error, one JSON object to standard
 // output. Exit status: 0 fitted, 1 bad input (one line naming the file or key), 2 bad command
 // line, 3 the fit failed (a stage with no converged evaluation, no minimum within a factor 1e6
@@ -333,7 +334,12 @@ StageFit fit_stage(const TetMesh& mesh, const Scene& base, Stage stage, const St
     const Scene scene = stage == kParenchyma ? stage_scene(base, stage, modulus, base.capsule.young_modulus)
                                              : stage_scene(base, stage, parenchyma_modulus, modulus);
     Displacements u;
-    const std::string why = solve_levels(mesh, scene, data.levels, &u);
+    std::string why;
+    try {
+      why = solve_levels(mesh, scene, data.levels, &u);
+    } catch (const std::invalid_argument& e) {  // a modulus the model refuses (out of its bounds)
+      why = e.what();
+    }
     ++fit.evaluations;
     std::cerr << "calibrate: " << std::setw(10) << std::left << kStageNames[stage] << std::right << " E "
               << std::setprecision(9) << std::setw(15) << modulus << " Pa  ";
