@@ -173,8 +173,8 @@ def measure(record):
         "halves": [sum(1 for m in window if m.arrival < start + span / 2),
                    sum(1 for m in window if m.arrival >= start + span / 2)],
         "stamp_gaps": [b - a for a, b in zip(stamps, stamps[1:])],
-        "long_stamp_gaps": [dict(g, at_s=g["at_s"] - start) for g in stamp_gaps(stamps, two_frames, machine,
-                                                                                 to_monotonic)],
+        "long_stamp_gaps": [dict(g, at_s=g["at_s"] - start)
+                            for g in stamp_gaps(stamps, two_frames, machine, to_monotonic)],
         "frame_gaps": [b - a for a, b in zip(own, own[1:])],
         "busy": sum(1 for m in window if m.state == "busy"),
         # Heartbeats in a frame 0.2 s long or longer: each injected 0.3 s delay has some.
@@ -230,7 +230,8 @@ def checks(record, m):
         # A held-up step lasts nine frames of 30 Hz: without the heartbeat, no "busy" at all
         # (tried: the heartbeat disabled fails the 30 s rostest, 0 busy of 530 statuses).
         # Counted in frames of 0.2 s or more: a heartbeat may also come in a normal frame.
-        "heartbeats while the injected delays held steps up": fault_every == 0 or 0 < m["held_steps"] <= m["busy_long"],
+        "heartbeats while the injected delays held steps up":
+            fault_every == 0 or 0 < m["held_steps"] <= m["busy_long"],
         "the held-up steps' statuses say so (as many as one injection in five, within 10% + 2)":
             abs(m["held_steps"] - m["delays_expected"]) <= 0.1 * m["delays_expected"] + 2,
         "no status gap above %g s" % record["max_gap"]: bool(m["gaps"]) and max(m["gaps"]) <= record["max_gap"],
@@ -246,7 +247,8 @@ def timing_checks(record, m):
             g["the_node's_part_s"] <= two_frames for g in m["long_gaps"]),
         "status stamps (when the node published) <= two frames apart while the machine ran": bool(m["stamp_gaps"])
         and all(g["stamps_apart_s"] - g["machine_stalled_s"] <= two_frames for g in m["long_stamp_gaps"]),
-        "frame rate >= 90% of the node's rate (outside the injected delays)": m["kept_hz"] >= 0.9 * record["node_rate"],
+        "frame rate >= 90% of the node's rate (outside the injected delays)":
+            m["kept_hz"] >= 0.9 * record["node_rate"],
         "no growing queue (late latency <= 2 x early + 0.2 s)": bool(m["early"]) and bool(m["late"])
         and np.median(m["late"]) <= 2 * np.median(m["early"]) + 0.2,
     }

@@ -229,7 +229,8 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
                  "YAML file with an instruments: list in the scene format, moving along\n"
                  "their trajectories from the first frame (e.g. config/bench/*.yaml)")
       ->option_text("FILE");
-  tool::add_overrides(app, o->overrides, "override a scalar of the scene, e.g. --set solver.dt=0.001 (repeatable)");
+  tool::add_overrides(app, o->overrides,
+                      "override a scalar of the scene, e.g. --set solver.dt=0.001 (repeatable)");
   app.add_option("--frames", o->loading.frames, "timed frames per run, >= 1 (default 100)")
       ->option_text("N")
       ->check(tool::at_least(1));
@@ -259,10 +260,11 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
           },
           "SPEC"))
       ->each([o](const std::string& text) { o->specs.push_back(parse_spec(text)); });
-  const std::string threads_bounds = "in [1, " + std::to_string(liver_sim::WorkerPool::kMaxThreads) + "]";
-  tool::add_list(app, "--threads", "N,...", o->thread_counts, "solver.threads of the runs, each " + threads_bounds + " (default 1)")
-      ->check(tool::integer(threads_bounds, [](long n) { return n >= 1 && n <= liver_sim::WorkerPool::kMaxThreads; }));
-  tool::add_list(app, "--load", "N,...", o->loads, "busy threads beside the runs, one run per count, each >= 0 (default 0)")
+  tool::add_list(app, "--threads", "N,...", o->thread_counts,
+                 "solver.threads of the runs, each " + tool::thread_bounds() + " (default 1)")
+      ->check(tool::thread_count());
+  tool::add_list(app, "--load", "N,...", o->loads,
+                 "busy threads beside the runs, one run per count, each >= 0 (default 0)")
       ->check(tool::at_least(0));
   app.add_option("--realtime-priority", o->loading.realtime_priority,
                  "SCHED_FIFO priority (1-99) of the timed runs' threads (default 0: normal)")

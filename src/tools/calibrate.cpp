@@ -86,7 +86,8 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
   app.add_option("--synthesize", o->synthesize, "write the scene's probe displacements without and with capsule")
       ->option_text("OUT.csv");
   CLI::Option* levels =
-      tool::add_list(app, "--levels", "L,...", o->levels, "load levels to synthesize, fractions of the scene's loads, > 0 (default 1)")
+      tool::add_list(app, "--levels", "L,...", o->levels,
+                     "load levels to synthesize, fractions of the scene's loads, > 0 (default 1)")
           ->check(tool::positive());
   app.add_option("--measured", o->measured, "fit the parenchyma, then the capsule Young's modulus to these data")
       ->option_text("IN.csv");
@@ -100,7 +101,8 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
                      "known modulus (Pa, > 0): exit 3 when the fit is off by more than --tolerance")};
   for (CLI::Option* option : start) option->option_text("E0")->check(tool::positive());
   for (CLI::Option* option : expect) option->option_text("E")->check(tool::positive());
-  app.add_option("--tolerance", o->tolerance, "how far, relative, a fitted modulus may be from its expected one, > 0\n(default 0.01)")
+  app.add_option("--tolerance", o->tolerance,
+                 "how far, relative, a fitted modulus may be from its expected one, > 0\n(default 0.01)")
       ->option_text("REL")
       ->check(tool::positive());
   app.callback([&] {
@@ -393,8 +395,8 @@ int calibrate(const Options& opt, const Scene& base, const TetMesh& mesh) {
   bool ok = true;
   for (Stage stage : {kParenchyma, kCapsule}) {
     const double parenchyma_modulus = fits[kParenchyma] ? fits[kParenchyma]->young_modulus : 0;
-    fits[stage] = fit_stage(mesh, base, stage, data[stage], opt.has_start[stage] ? opt.start[stage] : defaults[stage],
-                            parenchyma_modulus);
+    fits[stage] = fit_stage(mesh, base, stage, data[stage],
+                            opt.has_start[stage] ? opt.start[stage] : defaults[stage], parenchyma_modulus);
     if (!fits[stage]->failure.empty()) {
       ok = false;
       break;  // the capsule stage needs the parenchyma modulus

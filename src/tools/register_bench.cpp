@@ -100,7 +100,8 @@ std::optional<int> parse(int argc, char** argv, Options* o) {
   app.add_option("--repeats", o->repeats, "runs of each case with other random clouds, >= 1 (default 1)")
       ->option_text("R")
       ->check(tool::at_least(1));
-  tool::add_list(app, "--noise", "M,...", o->noise, "depth noise at 25 cm (m, standard deviation, >= 0; default 0.001)")
+  tool::add_list(app, "--noise", "M,...", o->noise,
+                 "depth noise at 25 cm (m, standard deviation, >= 0; default 0.001)")
       ->check(tool::non_negative());
   tool::add_list(app, "--visible", "FRACTION,...", o->visible,
                  "share of the surface area in the sensor's view, in (0, 1] (default 0.3)")

@@ -15,7 +15,6 @@
 #include <vector>
 
 #include "liver_sim/io/vtu_writer.h"
-#include "liver_sim/runtime/worker_pool.h"
 #include "liver_sim/simulation/liver_model.h"
 #include "tool_io.h"
 
@@ -43,11 +42,10 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
   tool::add_overrides(app, o->overrides, "override a scalar of the scene, e.g. --set capsule.enabled=false");
   int threads = 0;
   app.add_option("--threads", threads,
-                 "threads of the element loops (solver.threads, default 1, in [1, " +
-                     std::to_string(liver_sim::WorkerPool::kMaxThreads) + "]; results do not change)")
+                 "threads of the element loops (solver.threads, default 1, " + tool::thread_bounds() +
+                     "; results do not change)")
       ->option_text("N")
-      ->check(tool::integer("in [1, " + std::to_string(liver_sim::WorkerPool::kMaxThreads) + "]",
-                            [](long n) { return n >= 1 && n <= liver_sim::WorkerPool::kMaxThreads; }));
+      ->check(tool::thread_count());
   app.add_option("--vtu", o->vtu, "write the final mesh with its displacement field (VTK XML)")->option_text("FILE");
   app.add_option("--csv", o->csv, "write the probe displacements after every step")->option_text("FILE");
   app.add_flag("--quiet", o->quiet, "no progress on standard error");

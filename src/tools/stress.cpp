@@ -378,7 +378,8 @@ int main(int argc, char** argv) {
   for (const Case& c : all)
     if (std::find(groups.begin(), groups.end(), c.group) == groups.end()) {
       groups.push_back(c.group);
-      group_list += (group_list.empty() ? "" : ", ") + (c.group.find(' ') == std::string::npos ? c.group : "'" + c.group + "'");
+      const bool one_word = c.group.find(' ') == std::string::npos;
+      group_list += (group_list.empty() ? "" : ", ") + (one_word ? c.group : "'" + c.group + "'");
     }
   CLI::App app(
       "Runs the numerical stress matrix; a Markdown table on standard output; exit status 0 when every\n"

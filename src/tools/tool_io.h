@@ -28,6 +28,8 @@
 #include <utility>
 #include <vector>
 
+#include "liver_sim/runtime/worker_pool.h"
+
 namespace liver_sim::tool {
 
 constexpr int kBadCommandLine = 2;
@@ -125,6 +127,12 @@ inline CLI::Validator integer(const std::string& bounds, std::function<bool(long
 }
 inline CLI::Validator at_least(long low) {
   return integer(">= " + std::to_string(low), [low](long n) { return n >= low; });
+}
+
+// solver.threads, the element loops' threads: its bounds as the help says them, and its check.
+inline std::string thread_bounds() { return "in [1, " + std::to_string(WorkerPool::kMaxThreads) + "]"; }
+inline CLI::Validator thread_count() {
+  return integer(thread_bounds(), [](long n) { return n >= 1 && n <= WorkerPool::kMaxThreads; });
 }
 
 // Prints a tool's JSON result: two-space indentation; a number that is not finite as null (JSON

@@ -38,8 +38,8 @@ class ToolJson(unittest.TestCase):
 
     def test_simulate_names(self):
         quoted = json.dumps(ODD)  # also a YAML double-quoted scalar
-        path = self.scene("aspiration_tube.yaml",
-                          lambda s: s.replace("name: centre", "name: " + quoted).replace("name: tube", "name: " + quoted))
+        path = self.scene("aspiration_tube.yaml", lambda s: s.replace("name: centre", "name: " + quoted)
+                          .replace("name: tube", "name: " + quoted))
         run = subprocess.run([SIMULATE, "--scene", path, "--quiet"], capture_output=True, text=True, timeout=300)
         self.assertEqual(run.returncode, 0, run.stderr)
         result = strict_json(run.stdout)
