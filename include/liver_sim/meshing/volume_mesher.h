@@ -20,7 +20,15 @@ struct VolumeMeshOptions {
   double feature_angle = 40;    // degrees: surface creases sharper than this stay edges of the mesh
   double max_deviation = 0.5e-3;  // m, > 0: edges on curved parts shortened (down to a quarter of the
                                   // size) so that they bulge at most this far from the surface
+  // > 0: a surface gmsh splits into more patches than this at the feature angle is taken for
+  // stair-steps or noise, refused with RoughSurfaceError before any meshing (re-surface it)
+  int max_patches = 0;
   std::function<void(const std::string&)> progress;  // one line per stage, e.g. "meshing volume"
+};
+
+class RoughSurfaceError : public MeshError {
+ public:
+  using MeshError::MeshError;
 };
 
 struct VolumeMeshReport {
@@ -31,7 +39,7 @@ struct VolumeMeshReport {
 
 // `surface`: closed, manifold, outward-oriented, in metres (repair_surface's output). Returns
 // positively oriented tetrahedra (checked). Throws MeshError naming `origin` with gmsh's message when gmsh
-// fails.
+// fails, RoughSurfaceError (see max_patches).
 TetMesh mesh_volume(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
                     VolumeMeshReport* report = nullptr);
 

@@ -164,6 +164,9 @@ TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, c
     throw MeshError(origin + ": gmsh could not make patches of the surface: " + error);
   std::vector<std::pair<int, int>> surfaces;
   gmsh::model::getEntities(surfaces, 2);
+  if (options.max_patches > 0 && static_cast<int>(surfaces.size()) > options.max_patches)
+    throw RoughSurfaceError(origin + ": stair-steps or noise: the surface splits into " + std::to_string(surfaces.size()) +
+                            " patches at the feature angle (a smooth liver: a few)");
   std::vector<int> surface_tags;
   for (const auto& [dim, tag] : surfaces) surface_tags.push_back(tag);
   const int loop = gmsh::model::geo::addSurfaceLoop(surface_tags);
