@@ -219,6 +219,8 @@ int run(const Options& o) {
      << "  \"element_size\": " << m.mesh_report.element_size << ",\n"
      << "  \"meshing_passes\": " << m.mesh_report.passes << ",\n"
      << "  \"curvature_sizing\": " << (m.mesh_report.curvature_sizing ? "true" : "false") << ",\n"
+     << "  \"slivers\": {\"peeled\": " << m.slivers.peeled << ", \"moved_nodes\": " << m.slivers.moved_nodes
+     << ", \"min_dihedral_before_deg\": " << (m.slivers.peeled + m.slivers.moved_nodes > 0 ? json_number(m.slivers.before_deg) : "null") << "},\n"
      << "  \"quality\": {\"min_dihedral_deg\": " << quality.min_dihedral_deg
      << ", \"max_dihedral_deg\": " << quality.max_dihedral_deg
      << ", \"radius_ratio\": {\"min\": " << quality.min_radius_ratio << ", \"mean\": " << quality.mean_radius_ratio

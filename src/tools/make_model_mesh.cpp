@@ -139,6 +139,14 @@ ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::
     }
     r.times.emplace_back("mesh", clock.lap());
     r.quality = tet_quality(r.mesh);
+    if (r.quality.min_dihedral_deg < o.min_dihedral) {
+      r.slivers = repair_slivers(r.mesh, o.min_dihedral);
+      say("slivers: smallest dihedral angle " + std::to_string(r.slivers.before_deg) + " deg; " +
+          std::to_string(r.slivers.peeled) + " peeled off the boundary, " + std::to_string(r.slivers.moved_nodes) +
+          " nodes moved: " + std::to_string(r.slivers.after_deg) + " deg");
+      r.quality = tet_quality(r.mesh);
+      r.times.emplace_back("slivers", clock.lap());
+    }
     r.missed = missed_targets(o, r.quality, r.mesh.T.rows(), o.size > 0);
     if (r.missed.empty() || !may_resurface || r.resurfaced) break;
     resurface_input(r.input_name + ": " + r.missed);

@@ -14,6 +14,7 @@
 #include "liver_sim/geometry/mesh_quality.h"
 #include "liver_sim/geometry/surface_mesh.h"
 #include "liver_sim/meshing/resurface.h"
+#include "liver_sim/meshing/sliver_repair.h"
 #include "liver_sim/meshing/surface_repair.h"
 #include "liver_sim/meshing/volume_mesher.h"
 #include "make_model_options.h"
@@ -32,6 +33,7 @@ struct ModelMesh {
   ResurfaceReport resurfacing;
   TetMesh mesh;
   VolumeMeshReport mesh_report;
+  SliverRepairReport slivers;      // when gmsh's mesh missed --min-dihedral
   TetQuality quality;
   std::string missed;              // the targets missed and why; empty when all are met
   std::vector<std::pair<std::string, double>> times;  // stage, s
