@@ -195,8 +195,8 @@ TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, c
     std::vector<std::size_t> tets, tet_nodes;
     gmsh::model::mesh::getElementsByType(4, tets, tet_nodes);
     const double n = static_cast<double>(tets.size());
-    // Up to two corrections when the count was asked for and missed by more than 15%.
-    if (options.element_size > 0 || corrections == 2 || n == 0 || std::abs(n / options.target_elements - 1.0) <= 0.15)
+    // Up to four corrections when the count was asked for and missed by more than 15%.
+    if (options.element_size > 0 || corrections == 4 || n == 0 || std::abs(n / options.target_elements - 1.0) <= 0.15)
       break;
     h *= std::cbrt(n / options.target_elements);
     gmsh::model::mesh::clear();
