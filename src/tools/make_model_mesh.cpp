@@ -112,7 +112,13 @@ ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::
     }
     r.times.emplace_back("repair", clock.lap());
     if (o.resurface == Resurface::Always) resurface_input("--resurface always");
-    else if (!defect.empty()) resurface_input(defect);
+    else if (!defect.empty()) {
+      try {
+        resurface_input(defect);
+      } catch (const MeshError& e) {  // the defect first: it is what the user must mend
+        throw MeshError(defect + " (re-surfacing could not mend it: " + e.what() + ")");
+      }
+    }
   }
 
   VolumeMeshOptions mesh_options;
