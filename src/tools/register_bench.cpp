@@ -22,7 +22,6 @@
 // other random clouds; --targets-csv writes every target's error at the last frame of every run.
 // Progress on stderr. Pin it (taskset -c 0) for timings.
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <ctime>
 #include <fstream>
@@ -37,6 +36,7 @@
 #include "liver_sim/simulation/liver_model.h"
 #include "liver_sim/registration/registration.h"
 #include "liver_sim/registration/target_uncertainty.h"
+#include "liver_sim/session/tracking_session.h"
 #include "scenarios.h"
 
 namespace {
@@ -267,9 +267,12 @@ int main(int argc, char** argv) {
         model_scene.parenchyma.young_modulus *= stiffness;
         if (opt.truth_attachments) model_scene.fixed = truth_scene.fixed;
         if (opt.truth_attachments || !opt.estimate_supports) model_scene.registration.candidate_supports.clear();
-        LiverModel model(mesh, model_scene);
         // The pre-operative model: its own scene at equilibrium (the inverse crime: the truth's
-        // frame 0 exactly).
+        // frame 0 exactly). The session starts from it; its analyses run in the frame that
+        // registered the cloud, after every cloud (the node's, at most once a period, on a thread).
+        SessionOptions session_options;
+        session_options.analysis = RegistrationAnalysis::Placement::InFrame;
+        session_options.analysis_period = 0;
         {
           Scene tight = model_scene;
           tight.solver.mode = SolverOptions::Mode::Static;
@@ -278,12 +281,13 @@ int main(int argc, char** argv) {
           LiverModel rest(mesh, tight);
           const StepResult r = rest.step();
           if (!r.converged()) throw std::runtime_error("the pre-operative model did not converge: " + r.message);
-          model.set_positions(rest.positions());
+          session_options.start = rest.positions();
         }
+        TrackingSession session(mesh, model_scene, session_options);
+        const LiverModel& model = session.model();
+        const SurfaceRegistration& registration = session.registration();
         const Eigen::VectorXd preoperative = model.positions();
         const std::vector<Eigen::Vector3d> preoperative_targets = target_positions(model);
-        TargetUncertainty uncertainty(model, model_scene.registration.uncertainty);
-        StateCompliance compliance(model);
         if (preoperative_targets.size() != truth.names.size())
           throw std::runtime_error("the model tracks " + std::to_string(preoperative_targets.size()) + " targets, the truth " +
                                    std::to_string(truth.names.size()));
@@ -306,10 +310,7 @@ int main(int argc, char** argv) {
               std::string worst_target;
               double worst = -1;
               for (int r = 0; r < opt.repeats; ++r) {
-                model.reset();
-                model.set_stiffness_scale(1.0);
-                model.set_positions(preoperative);
-                SurfaceRegistration registration(model, model_scene.registration);
+                session.submit(Reset{preoperative});
                 std::vector<TargetUncertainty::Covariance> covariance;
                 for (int k = 1; k <= opt.frames; ++k) {
                   const unsigned seed = 1000 * r + k;  // the same draws for every case: differences are the case's
@@ -345,21 +346,20 @@ int main(int argc, char** argv) {
                     eye = view.eye;
                   }
                   cloud_points = static_cast<int>(cloud.size());
+                  // The analyses after every cloud: which candidate supports to hold, the tissue's
+                  // stiffness, the hidden loads; the targets' covariances at the last.
+                  if (k == opt.frames) session.want_covariances();
+                  session.submit(Cloud{std::move(cloud), eye, 0});
                   // CPU time besides the wall clock: the cost on a core shared with other jobs.
                   const std::clock_t c0 = std::clock();
-                  frame = registration.register_cloud(cloud, eye);
+                  const FrameReport report = session.advance();
                   const std::clock_t c1 = std::clock();
-                  frame_cpu_ms.push_back(1e3 * (c1 - c0) / CLOCKS_PER_SEC);
-                  // The analyses: which candidate supports to hold (every frame), the targets'
-                  // covariances (at the last).
-                  const auto t0 = std::chrono::steady_clock::now();
-                  compliance.factorize();
-                  if (k == opt.frames) covariance = uncertainty.covariances(compliance, registration.cloud_springs());
-                  registration.estimate_supports(compliance, registration.cloud_springs());
-                  registration.estimate_tissue_stiffness(compliance, registration.cloud_springs());
-                  registration.estimate_hidden_loads(compliance, registration.cloud_springs());
-                  analysis_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / runs;
-                  analysis_cpu_ms += 1e3 * (std::clock() - c1) / CLOCKS_PER_SEC / runs;
+                  if (!report.cloud) throw std::runtime_error("frame " + std::to_string(k) + ": the cloud was refused: " + session.notices().last_refusal());
+                  frame = *report.cloud;
+                  frame_cpu_ms.push_back(1e3 * (c1 - c0) / CLOCKS_PER_SEC - 1e3 * report.analysis.cpu_time);
+                  if (k == opt.frames) covariance = session.covariances();
+                  analysis_ms += 1e3 * report.analysis.wall_time / runs;
+                  analysis_cpu_ms += 1e3 * report.analysis.cpu_time / runs;
                   frame_ms.push_back(frame.total_ms);
                   newton += frame.newton_iterations;
                   filter_ms += frame.filter_ms / runs;
@@ -369,6 +369,8 @@ int main(int argc, char** argv) {
                   diverged += frame.step.status == StepResult::Status::Diverged;
                 }
                 const std::vector<Eigen::Vector3d> registered = target_positions(model);
+                if (covariance.size() != registered.size())
+                  throw std::runtime_error("no target covariances at the last frame: " + session.last_step().message);
                 energy += spring_energy(model) / opt.repeats;
                 tissue_factor += model.stiffness_scale() / opt.repeats;
                 hidden_load += registration.hidden_load_total() / opt.repeats;
