@@ -20,6 +20,8 @@ PACKAGES=(
   python3-visualization-msgs python3-diagnostic-msgs python3-matplotlib python3-numpy clang libclang-rt-14-dev
   python3-gmsh libgmsh-dev stress-ng
   libvtk9-dev zlib1g-dev   # make_model: re-surfacing (VTK), compressed label maps (zlib)
+  # The tools' command lines, JSON output and calibrate's minimiser (header-only).
+  libcli11-dev nlohmann-json3-dev libboost-dev
   # The ROS command-line tools: rostopic, rosservice, rosnode, rosrun, static_transform_publisher.
   python3-rostopic python3-rosservice python3-rosnode rosbash tf2-tools
 )

@@ -5,7 +5,7 @@
 #   scripts/measure_or.sh [--clouds HZ] [--duration S] [--busy CORE] [--json FILE] [-- NODE_ARGS...]
 #     --busy CORE   one more process keeps CORE busy meanwhile (stress-ng)
 #     NODE_ARGS     liver_sim.launch arguments, e.g. cpu_affinity:=[0] (the default) rate:=30
-source "$(dirname "$0")/ros_env.sh" 11497
+source "$(dirname "$0")/ros_env.sh"
 measure=() busy=""
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -16,7 +16,7 @@ while [ $# -gt 0 ]; do
   esac
   shift
 done
-roslaunch -p 11497 liver_sim liver_sim.launch output:=log cpu_affinity:=[0] "$@" >/dev/null 2>&1 & LAUNCH=$!
+roslaunch -p "$PORT" liver_sim liver_sim.launch output:=log cpu_affinity:=[0] "$@" >/dev/null 2>&1 & LAUNCH=$!
 pids=("$LAUNCH")
 if [ -n "$busy" ]; then taskset -c "$busy" stress-ng --cpu 1 --timeout 600 >/dev/null 2>&1 & pids+=($!); fi
 trap 'kill -INT "${pids[@]}" 2>/dev/null; wait 2>/dev/null' EXIT
