@@ -40,14 +40,16 @@ int resolve_label(const std::string& text, const LabelImage& image, const std::s
 }
 
 // Which targets the mesh misses, and why; empty when it meets them all.
-std::string missed_targets(const Options& o, const TetQuality& q, Eigen::Index tetrahedra, bool sized) {
+std::string missed_targets(const Options& o, const TetQuality& q, const TetMesh& mesh, bool sized) {
+  const Eigen::Index tetrahedra = mesh.T.rows();
   std::ostringstream m;
   if (q.min_dihedral_deg < o.min_dihedral)
     m << "smallest dihedral angle " << q.min_dihedral_deg << " deg, under --min-dihedral " << o.min_dihedral
       << " (slivers gmsh's optimiser could not remove)";
   if (!sized && std::abs(static_cast<double>(tetrahedra) / o.elements - 1.0) > 0.15)
     m << (m.tellp() > 0 ? "; " : "") << tetrahedra << " tetrahedra, more than 15% from --elements " << o.elements
-      << " (the curvature sizing refines beyond the count's estimate)";
+      << " (the boundary needs " << boundary_triangles(mesh.T).rows()
+      << " triangles to stay within --max-deviation: ask for more --elements or a larger --max-deviation)";
   return m.str();
 }
 
@@ -134,6 +136,7 @@ ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::
       throw CommandLineError("--size: " + std::to_string(o.size) + " " + o.unit_name +
                              " would make over 1,000,000 tetrahedra");
     mesh_options.max_patches = may_resurface && !r.resurfaced ? kMaxPatches : 0;
+    mesh_options.remesh_boundary = r.resurfaced;  // a level set: smooth, no crease
     try {
       r.mesh_report = VolumeMeshReport();
       r.mesh = mesh_volume(r.surface, r.input_name, mesh_options, &r.mesh_report);
@@ -153,7 +156,7 @@ ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::
       r.quality = tet_quality(r.mesh);
       r.times.emplace_back("slivers", clock.lap());
     }
-    r.missed = missed_targets(o, r.quality, r.mesh.T.rows(), o.size > 0);
+    r.missed = missed_targets(o, r.quality, r.mesh, o.size > 0);
     if (r.missed.empty() || !may_resurface || r.resurfaced) break;
     resurface_input(r.input_name + ": " + r.missed);
   }

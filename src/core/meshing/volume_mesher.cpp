@@ -9,6 +9,7 @@
 #include <optional>
 #include <vector>
 
+#include "liver_sim/meshing/surface_remesh.h"
 #include "liver_sim/meshing/surface_repair.h"
 
 namespace liver_sim {
@@ -138,12 +139,8 @@ struct SizingFailure {
   std::string message;
 };
 
-// One gmsh session from the input triangles to the tetrahedra.
-TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
-                        double h, bool curvature_sizing, VolumeMeshReport& r,
-                        const std::function<void(const std::string&)>& progress) {
-  GmshSession session;
-  gmsh::model::add("liver");
+// The surface's nodes and triangles as one discrete surface of the current gmsh model; its tag.
+int add_discrete_surface(const SurfaceMesh& surface) {
   const int patch = gmsh::model::addDiscreteEntity(2);
   std::vector<std::size_t> node_tags(surface.V.rows());
   std::iota(node_tags.begin(), node_tags.end(), std::size_t{1});
@@ -156,6 +153,16 @@ TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, c
   for (Eigen::Index t = 0; t < surface.F.rows(); ++t)
     for (int k = 0; k < 3; ++k) corners[3 * t + k] = static_cast<std::size_t>(surface.F(t, k)) + 1;
   gmsh::model::mesh::addElementsByType(patch, 2, triangle_tags, corners);
+  return patch;
+}
+
+// One gmsh session from the input triangles to the tetrahedra.
+TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
+                        double h, bool curvature_sizing, VolumeMeshReport& r,
+                        const std::function<void(const std::string&)>& progress) {
+  GmshSession session;
+  gmsh::model::add("liver");
+  add_discrete_surface(surface);
 
   progress("classifying the surface (" + std::to_string(surface.F.rows()) + " triangles) into patches");
   gmsh::model::mesh::classifySurfaces(options.feature_angle * M_PI / 180.0, true, true, M_PI);
@@ -204,6 +211,38 @@ TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, c
   return extract(origin);
 }
 
+// The surface remeshed at sizes from its curvature and thickness (at most h) and filled. When the
+// count misses, h is corrected along the count's power law in h as the last two passes measured
+// it (the boundary's curvature-bound edges make it flatter than h^-3; h^-3 for the first step).
+TetMesh remesh_and_fill(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
+                        double h, VolumeMeshReport& r, const std::function<void(const std::string&)>& progress) {
+  double last_h = 0, last_n = 0;
+  for (int corrections = 0;; ++corrections) {
+    ++r.passes;
+    r.element_size = h;
+    r.curvature_sizing = true;
+    // The shortest edge: one whose bulge on a bend of radius `deviation` is half of it; a
+    // re-surfaced surface, blurred, bends no tighter.
+    const double shortest = std::min(4 * options.max_deviation, h);
+    progress("remeshing the surface (" + std::to_string(surface.F.rows()) + " triangles) at " +
+             std::to_string(shortest * 1e3) + "-" + std::to_string(h * 1e3) + " mm (pass " + std::to_string(r.passes) + ")");
+    RemeshOptions remesh;
+    remesh.deviation = options.max_deviation;
+    remesh.min_size = shortest;
+    const SurfaceMesh boundary = remesh_surface(
+        surface, curvature_sizes(surface, options.max_deviation, shortest, h, options.gradation), remesh, origin);
+    repair_surface(boundary, origin + " (remeshed)");  // closed, manifold, not crossing itself, or said where
+    progress("filling the volume (" + std::to_string(boundary.F.rows()) + " boundary triangles)");
+    TetMesh m = fill_volume(boundary, h, origin);
+    const double n = static_cast<double>(m.T.rows());
+    if (options.element_size > 0 || corrections == 4 || std::abs(n / options.target_elements - 1.0) <= 0.15) return m;
+    double exponent = last_n > 0 && n != last_n ? std::log(n / last_n) / std::log(h / last_h) : -3;
+    exponent = std::clamp(exponent, -3.0, -0.75);  // steps of at most (n / target)^(4/3) in h
+    last_h = h, last_n = n;
+    h *= std::pow(options.target_elements / n, 1 / exponent);
+  }
+}
+
 }  // namespace
 
 TetMesh mesh_volume(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
@@ -218,6 +257,11 @@ TetMesh mesh_volume(const SurfaceMesh& surface, const std::string& origin, const
   }
   if (!(h > 0) || !std::isfinite(h)) throw MeshError(origin + ": no valid element size");
   VolumeMeshReport r;
+  if (options.remesh_boundary) {
+    TetMesh m = remesh_and_fill(surface, origin, options, h, r, progress);
+    if (report) *report = r;
+    return m;
+  }
   try {
     TetMesh m;
     try {
@@ -232,6 +276,24 @@ TetMesh mesh_volume(const SurfaceMesh& surface, const std::string& origin, const
     if (report) *report = r;
     return m;
   } catch (const std::string& message) {  // gmsh's exceptions outside its parallel regions
+    throw MeshError(origin + ": gmsh: " + message);
+  }
+}
+
+TetMesh fill_volume(const SurfaceMesh& boundary, double max_size, const std::string& origin) {
+  if (!(max_size > 0) || !std::isfinite(max_size)) throw MeshError(origin + ": no valid element size");
+  try {
+    GmshSession session;
+    gmsh::model::add("liver");
+    const int patch = add_discrete_surface(boundary);
+    // A discrete surface without a parametrisation keeps its triangles: only the volume is meshed.
+    gmsh::model::geo::addVolume({gmsh::model::geo::addSurfaceLoop({patch})});
+    gmsh::model::geo::synchronize();
+    gmsh::option::setNumber("Mesh.MeshSizeMax", max_size);
+    gmsh::model::mesh::generate(3);
+    if (const std::string error = gmsh_error(); !error.empty()) throw MeshError(origin + ": gmsh: " + error);
+    return extract(origin);
+  } catch (const std::string& message) {
     throw MeshError(origin + ": gmsh: " + message);
   }
 }
