@@ -15,14 +15,12 @@
 #include "liver_sim/meshing/resurface.h"
 #include "liver_sim/meshing/surface_deviation.h"
 #include "liver_sim/meshing/surface_repair.h"
+#include "surface_fixtures.h"
 
 namespace liver_sim {
 namespace {
 
-SurfaceMesh phantom_surface() {
-  const TetMesh m = read_mesh(std::string(LIVER_SIM_SOURCE_DIR) + "/config/phantom/liver_phantom.msh");
-  return repair_surface({m.V, boundary_triangles(m.T)}, "phantom boundary");
-}
+using meshing_test::phantom_surface;
 
 // The phantom as label 1 on an oblique, anisotropic grid (LPS, m): a voxel is inside when its
 // centre lies behind the closest triangle of the phantom's surface (exact closest points, not
