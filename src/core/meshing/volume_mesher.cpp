@@ -217,6 +217,9 @@ TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, c
 TetMesh remesh_and_fill(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
                         double h, VolumeMeshReport& r, const std::function<void(const std::string&)>& progress) {
   double last_h = 0, last_n = 0;
+  // Past twice the size the count asks of a uniform mesh, the inside's tetrahedra grow too large
+  // for the boundary's: poorly shaped, stiff in the model. The count is missed instead.
+  const double largest = 2 * h;
   for (int corrections = 0;; ++corrections) {
     ++r.passes;
     r.element_size = h;
@@ -235,11 +238,13 @@ TetMesh remesh_and_fill(const SurfaceMesh& surface, const std::string& origin, c
     progress("filling the volume (" + std::to_string(boundary.F.rows()) + " boundary triangles)");
     TetMesh m = fill_volume(boundary, h, origin);
     const double n = static_cast<double>(m.T.rows());
-    if (options.element_size > 0 || corrections == 4 || std::abs(n / options.target_elements - 1.0) <= 0.15) return m;
+    if (options.element_size > 0 || corrections == 4 || std::abs(n / options.target_elements - 1.0) <= 0.15 ||
+        (h >= largest && n > options.target_elements))
+      return m;
     double exponent = last_n > 0 && n != last_n ? std::log(n / last_n) / std::log(h / last_h) : -3;
     exponent = std::clamp(exponent, -3.0, -0.75);  // steps of at most (n / target)^(4/3) in h
     last_h = h, last_n = n;
-    h *= std::pow(options.target_elements / n, 1 / exponent);
+    h = std::min(largest, h * std::pow(options.target_elements / n, 1 / exponent));
   }
 }
 
