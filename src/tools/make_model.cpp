@@ -20,9 +20,9 @@
 #include <string>
 #include <vector>
 
-#include "json_text.h"
 #include "make_model_mesh.h"
 #include "make_model_options.h"
+#include "tool_io.h"
 #include "liver_sim/geometry/mesh_quality.h"
 #include "liver_sim/geometry/vessel_tree.h"
 #include "liver_sim/io/mesh_io.h"
@@ -37,6 +37,7 @@
 namespace {
 
 using namespace liver_sim;
+using Json = nlohmann::ordered_json;
 
 std::string vec(const Eigen::Vector3d& v) {
   std::ostringstream s;
@@ -66,8 +67,8 @@ int run(const Options& o) {
   const ModelMesh m = make_model_mesh(o, say);
   const SurfaceMesh& surface = m.surface;
   const TetMesh& mesh = m.mesh;
-  std::ostringstream times;
-  for (const auto& [stage, seconds] : m.times) times << "\"" << stage << "\": " << seconds << ", ";
+  Json times = Json::object();
+  for (const auto& [stage, seconds] : m.times) times[stage] = seconds;
   clock.lap();
 
   say("measuring quality and shape (" + std::to_string(mesh.T.rows()) + " tetrahedra)");
@@ -81,7 +82,7 @@ int run(const Options& o) {
     from_input = surface_deviation(m.input, surface, spacing);
     mesh_from_input = surface_deviation(m.input, boundary, spacing);
   }
-  times << "\"quality_and_distance\": " << clock.lap();
+  times["quality_and_distance"] = clock.lap();
 
   std::filesystem::create_directories(o.out);
   const std::filesystem::path dir(o.out);
@@ -166,76 +167,70 @@ int run(const Options& o) {
   } catch (const std::invalid_argument& e) {
     throw std::runtime_error((dir / scene_file).string() + ": " + e.what());
   }
-  times << ", \"scene_check\": " << clock.lap();
+  times["scene_check"] = clock.lap();
 
-  auto json_number = [](double x) {
-    std::ostringstream s;
-    s << std::setprecision(9) << x;
-    return s.str();
-  };
   auto deviation = [](const SurfaceDeviation& d) {
-    std::ostringstream s;
-    s << std::setprecision(9) << "{\"a_to_b\": {\"max\": " << d.a_to_b.max << ", \"mean\": " << d.a_to_b.mean
-      << "}, \"b_to_a\": {\"max\": " << d.b_to_a.max << ", \"mean\": " << d.b_to_a.mean
-      << "}, \"hausdorff\": " << d.hausdorff() << "}";
-    return s.str();
+    return Json{{"a_to_b", {{"max", d.a_to_b.max}, {"mean", d.a_to_b.mean}}},
+                      {"b_to_a", {{"max", d.b_to_a.max}, {"mean", d.b_to_a.mean}}},
+                      {"hausdorff", d.hausdorff()}};
   };
-  std::ostringstream resurfacing;
+  Json resurfacing = nullptr;
   if (m.resurfaced) {
     const ResurfaceReport& rr = m.resurfacing;
-    resurfacing << std::setprecision(9) << "{\"reason\": " << json_string(m.resurface_reason)
-                << ", \"voxel_size_m\": " << rr.voxel_size << ", \"smoothing_m\": "
-                << (o.smoothing > 0 ? o.smoothing * o.unit : 1e-3) << ", \"inside_voxels\": " << rr.inside_voxels
-                << ", \"disputed_voxels\": " << rr.disputed_voxels << ", \"pieces\": " << rr.pieces
-                << ", \"dropped_voxels\": " << rr.dropped_voxels << ", \"filled_voxels\": " << rr.filled_voxels
-                << ", \"triangles\": " << rr.triangles;
-    if (from_input)  // a: the input surface, b: the new surface (or the mesh's boundary)
-      resurfacing << ", \"input_to_new_surface_m\": " << deviation(*from_input)
-                  << ", \"input_to_mesh_m\": " << deviation(*mesh_from_input);
-    resurfacing << "}";
-  } else {
-    resurfacing << "null";
+    resurfacing = {{"reason", m.resurface_reason},
+                   {"voxel_size_m", rr.voxel_size},
+                   {"smoothing_m", o.smoothing > 0 ? o.smoothing * o.unit : 1e-3},
+                   {"inside_voxels", rr.inside_voxels},
+                   {"disputed_voxels", rr.disputed_voxels},
+                   {"pieces", rr.pieces},
+                   {"dropped_voxels", rr.dropped_voxels},
+                   {"filled_voxels", rr.filled_voxels},
+                   {"triangles", rr.triangles}};
+    if (from_input) {  // a: the input surface, b: the new surface (or the mesh's boundary)
+      resurfacing["input_to_new_surface_m"] = deviation(*from_input);
+      resurfacing["input_to_mesh_m"] = deviation(*mesh_from_input);
+    }
   }
-
-  std::ostringstream js;
-  js << std::setprecision(9) << "{\n"
-     << "  \"" << (o.label_map.empty() ? "surface" : "label_map") << "\": " << json_string(m.input_name) << ",\n"
-     << "  \"scene\": " << json_string((dir / scene_file).string()) << ",\n"
-     << "  \"input_triangles\": " << m.input_triangles << ",\n"
-     << "  \"repairs\": {\"merged_vertices\": " << m.repairs.merged_vertices
-     << ", \"unused_vertices\": " << m.repairs.unused_vertices
-     << ", \"collapsed_triangles\": " << m.repairs.collapsed_triangles
-     << ", \"duplicate_triangles\": " << m.repairs.duplicate_triangles
-     << ", \"reoriented_triangles\": " << m.repairs.reoriented_triangles
-     << ", \"inside_out\": " << (m.repairs.inside_out ? "true" : "false")
-     << ", \"dropped_shells\": " << m.repairs.dropped_shells << "},\n"
-     << "  \"surface_triangles\": " << surface.F.rows() << ",\n"
-     << "  \"resurfacing\": " << resurfacing.str() << ",\n"
-     << "  \"volume_m3\": {\"input\": " << (m.input.F.rows() > 0 ? json_number(enclosed_volume(m.input)) : "null")
-     << ", \"surface\": " << enclosed_volume(surface) << ", \"mesh\": " << enclosed_volume(boundary) << "},\n"
-     << "  \"nodes\": " << mesh.V.rows() << ",\n"
-     << "  \"tetrahedra\": " << mesh.T.rows() << ",\n"
-     << "  \"boundary_triangles\": " << boundary.F.rows() << ",\n"
-     << "  \"element_size\": " << m.mesh_report.element_size << ",\n"
-     << "  \"meshing_passes\": " << m.mesh_report.passes << ",\n"
-     << "  \"curvature_sizing\": " << (m.mesh_report.curvature_sizing ? "true" : "false") << ",\n"
-     << "  \"slivers\": {\"peeled\": " << m.slivers.peeled << ", \"moved_nodes\": " << m.slivers.moved_nodes
-     << ", \"min_dihedral_before_deg\": " << (m.slivers.peeled + m.slivers.moved_nodes > 0 ? json_number(m.slivers.before_deg) : "null") << "},\n"
-     << "  \"quality\": {\"min_dihedral_deg\": " << quality.min_dihedral_deg
-     << ", \"max_dihedral_deg\": " << quality.max_dihedral_deg
-     << ", \"radius_ratio\": {\"min\": " << quality.min_radius_ratio << ", \"mean\": " << quality.mean_radius_ratio
-     << "}},\n"
-     << "  \"hausdorff_m\": {\"surface_to_mesh\": {\"max\": " << distance.a_to_b.max << ", \"mean\": " << distance.a_to_b.mean
-     << "}, \"mesh_to_surface\": {\"max\": " << distance.b_to_a.max << ", \"mean\": " << distance.b_to_a.mean
-     << "}, \"hausdorff\": " << distance.hausdorff() << "},\n"
-     << "  \"fixed_nodes\": " << fixed_nodes << ",\n"
-     << "  \"vessels\": " << o.vessels.size() << ",\n"
-     << "  \"targets\": {\"min_dihedral_deg\": " << o.min_dihedral << ", \"tetrahedra\": "
-     << (o.size > 0 ? std::string("null") : std::to_string(o.elements)) << ", \"met\": " << (m.missed.empty() ? "true" : "false")
-     << ", \"missed\": " << json_string(m.missed) << "},\n"
-     << "  \"time_s\": {" << times.str() << "}\n"
-     << "}\n";
-  std::cout << js.str();
+  Json js;
+  js[o.label_map.empty() ? "surface" : "label_map"] = m.input_name;
+  js["scene"] = (dir / scene_file).string();
+  js["input_triangles"] = m.input_triangles;
+  js["repairs"] = {{"merged_vertices", m.repairs.merged_vertices},
+                   {"unused_vertices", m.repairs.unused_vertices},
+                   {"collapsed_triangles", m.repairs.collapsed_triangles},
+                   {"duplicate_triangles", m.repairs.duplicate_triangles},
+                   {"reoriented_triangles", m.repairs.reoriented_triangles},
+                   {"inside_out", m.repairs.inside_out},
+                   {"dropped_shells", m.repairs.dropped_shells}};
+  js["surface_triangles"] = surface.F.rows();
+  js["resurfacing"] = resurfacing;
+  js["volume_m3"] = {{"input", m.input.F.rows() > 0 ? Json(enclosed_volume(m.input)) : Json(nullptr)},
+                     {"surface", enclosed_volume(surface)},
+                     {"mesh", enclosed_volume(boundary)}};
+  js["nodes"] = mesh.V.rows();
+  js["tetrahedra"] = mesh.T.rows();
+  js["boundary_triangles"] = boundary.F.rows();
+  js["element_size"] = m.mesh_report.element_size;
+  js["meshing_passes"] = m.mesh_report.passes;
+  js["curvature_sizing"] = m.mesh_report.curvature_sizing;
+  const bool slivers = m.slivers.peeled + m.slivers.moved_nodes > 0;
+  js["slivers"] = {{"peeled", m.slivers.peeled},
+                   {"moved_nodes", m.slivers.moved_nodes},
+                   {"min_dihedral_before_deg", slivers ? Json(m.slivers.before_deg) : Json(nullptr)}};
+  js["quality"] = {{"min_dihedral_deg", quality.min_dihedral_deg},
+                   {"max_dihedral_deg", quality.max_dihedral_deg},
+                   {"radius_ratio", {{"min", quality.min_radius_ratio}, {"mean", quality.mean_radius_ratio}}}};
+  js["hausdorff_m"] = {{"surface_to_mesh", {{"max", distance.a_to_b.max}, {"mean", distance.a_to_b.mean}}},
+                       {"mesh_to_surface", {{"max", distance.b_to_a.max}, {"mean", distance.b_to_a.mean}}},
+                       {"hausdorff", distance.hausdorff()}};
+  js["fixed_nodes"] = fixed_nodes;
+  js["vessels"] = o.vessels.size();
+  js["targets"] = {{"min_dihedral_deg", o.min_dihedral},
+                   {"tetrahedra", o.size > 0 ? Json(nullptr) : Json(o.elements)},
+                   {"met", m.missed.empty()},
+                   {"missed", m.missed}};
+  js["time_s"] = times;
+  tool::print_json(std::cout, js);
   say("wrote " + (dir / mesh_file).string() + " and " + (dir / scene_file).string());
   if (!m.missed.empty()) {
     std::cerr << "make_model: " << m.input_name << ": the model is written but misses its targets: " << m.missed << "\n";
