@@ -232,9 +232,21 @@ TetMesh remesh_and_fill(const SurfaceMesh& surface, const std::string& origin, c
     RemeshOptions remesh;
     remesh.deviation = options.max_deviation;
     remesh.min_size = shortest;
-    const SurfaceMesh boundary = remesh_surface(
-        surface, curvature_sizes(surface, options.max_deviation, shortest, h, options.gradation), remesh, origin);
-    repair_surface(boundary, origin + " (remeshed)");  // closed, manifold, not crossing itself, or said where
+    std::vector<double> sizes = curvature_sizes(surface, options.max_deviation, shortest, h, options.gradation);
+    SurfaceMesh boundary;
+    // Where the remeshed sheets still cross (a gap the thickness bound underestimated), shorter
+    // edges everywhere, twice at most; then the crossing is reported where it is.
+    for (int retry = 0;; ++retry) {
+      boundary = remesh_surface(surface, sizes, remesh, origin);
+      try {
+        repair_surface(boundary, origin + " (remeshed)");  // closed, manifold, not crossing itself
+        break;
+      } catch (const SurfaceDefectError& e) {
+        if (retry == 2) throw;
+        progress(std::string(e.what()) + ": remeshing with edges 0.7 times as long");
+        for (double& size : sizes) size *= 0.7;
+      }
+    }
     progress("filling the volume (" + std::to_string(boundary.F.rows()) + " boundary triangles)");
     TetMesh m = fill_volume(boundary, h, origin);
     const double n = static_cast<double>(m.T.rows());
