@@ -14,7 +14,9 @@
 
 #include "liver_sim/io/mesh_io.h"
 #include "liver_sim/io/surface_io.h"
+#include "liver_sim/meshing/anatomy.h"
 #include "liver_sim/meshing/surface_repair.h"
+#include "liver_sim/scene/scene.h"
 
 namespace liver_sim {
 namespace meshing_test {
@@ -79,6 +81,21 @@ inline std::string read_error(const std::string& bytes, SurfaceFormat format) {
 inline SurfaceMesh phantom_surface() {
   const TetMesh m = read_mesh(std::string(LIVER_SIM_SOURCE_DIR) + "/config/phantom/liver_phantom.msh");
   return repair_surface({m.V, boundary_triangles(m.T)}, "phantom boundary");
+}
+
+// A model of `s` as make_model writes its scene: the reference parameters with the capsule,
+// attached at the bare area, under gravity supine; a static step solved to 1e-8.
+inline Scene gravity_scene(const SurfaceMesh& s) {
+  Scene scene;
+  scene.parenchyma.young_modulus = 30000;
+  scene.capsule.enabled = true;
+  scene.capsule.young_modulus = 3e6;
+  scene.capsule.thickness = 93e-6;
+  scene.fixed.push_back(bare_area(s));
+  scene.loads.push_back(LoadOptions::gravity({0, 9.81, 0}));
+  scene.solver.max_iterations = 50;
+  scene.solver.tolerance = 1e-8;
+  return scene;
 }
 
 }  // namespace meshing_test

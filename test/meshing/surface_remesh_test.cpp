@@ -143,15 +143,7 @@ TEST(FillVolume, KeepsTheBoundaryAndSimulatesUnderGravity) {
   EXPECT_NEAR(volume, enclosed_volume(boundary), 1e-9 * volume);
   EXPECT_LT(surface_deviation(level_set, boundary, 1e-3).hausdorff(), 1.5e-3);
 
-  Scene scene;
-  scene.parenchyma.young_modulus = 30000;
-  scene.capsule.enabled = true;
-  scene.capsule.young_modulus = 3e6;
-  scene.capsule.thickness = 93e-6;
-  scene.fixed.push_back(bare_area(phantom));
-  scene.loads.push_back(LoadOptions::gravity({0, 9.81, 0}));
-  scene.solver.max_iterations = 50;
-  scene.solver.tolerance = 1e-8;
+  const Scene scene = gravity_scene(phantom);
   LiverModel model(TetMesh(mesh), scene);
   const StepResult step = model.step();
   ASSERT_TRUE(step.converged()) << step.message;

@@ -48,15 +48,7 @@ TEST(VolumeMeshing, GeneratedMeshConvergesUnderGravity) {
   EXPECT_LT(surface_deviation(s, boundary, 1e-3).hausdorff(), 2e-3);
   EXPECT_GE(tet_quality(mesh).min_dihedral_deg, 5.0);
 
-  Scene scene;
-  scene.parenchyma.young_modulus = 30000;
-  scene.capsule.enabled = true;
-  scene.capsule.young_modulus = 3e6;
-  scene.capsule.thickness = 93e-6;
-  scene.fixed.push_back(bare_area(s));
-  scene.loads.push_back(LoadOptions::gravity({0, 9.81, 0}));
-  scene.solver.max_iterations = 50;
-  scene.solver.tolerance = 1e-8;
+  const Scene scene = gravity_scene(s);
   double volume = 0;
   for (int t = 0; t < mesh.T.rows(); ++t) volume += signed_volume(mesh.V, mesh.T, t);
   LiverModel model(std::move(mesh), scene);
