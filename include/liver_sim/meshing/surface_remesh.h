@@ -37,10 +37,12 @@ SurfaceMesh remesh_surface(const SurfaceMesh& reference, const std::vector<doubl
 
 // The edge length wanted at each vertex of a smooth closed surface: an edge of length L on a
 // surface of curvature k bulges L^2 k / 8 from it, so L = sqrt(8 deviation / k), clamped to
-// [min_size, max_size]; k is the largest turn of the normal per length toward a neighbour (the
-// largest principal curvature on a smooth surface). Graded: no vertex's size exceeds a
-// neighbour's by more than `gradation` times the path between them (Dijkstra over the edges), so
-// that sizes change gently and the triangles stay well shaped.
+// [min_size, max_size]; k is the largest curvature of the circles touching the surface at the
+// vertex through a neighbour (the largest principal curvature on a smooth surface). No longer
+// than the radius of the largest ball touching the surface there from inside or outside
+// (shrinking balls), so that remeshed sheets across a thin part or a narrow gap do not cross.
+// Graded: no vertex's size exceeds a neighbour's by more than `gradation` times the path between
+// them (Dijkstra over the edges), so that sizes change gently and the triangles stay well shaped.
 std::vector<double> curvature_sizes(const SurfaceMesh& surface, double deviation, double min_size, double max_size,
                                     double gradation);
 
