@@ -19,6 +19,7 @@ PACKAGES=(
   python3-rospy python3-rosbag python3-geometry-msgs python3-sensor-msgs python3-std-srvs
   python3-visualization-msgs python3-diagnostic-msgs python3-matplotlib python3-numpy clang libclang-rt-14-dev
   python3-gmsh libgmsh-dev stress-ng
+  libvtk9-dev zlib1g-dev   # make_model: re-surfacing (VTK), compressed label maps (zlib)
   # The tools' command lines, JSON output and calibrate's minimiser (header-only).
   libcli11-dev nlohmann-json3-dev libboost-dev
   # The ROS command-line tools: rostopic, rosservice, rosnode, rosrun, static_transform_publisher.

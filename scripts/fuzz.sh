@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Fuzzes the mesh, vessel-tree, scene and surface loaders with libFuzzer (clang, AddressSanitizer
+# Fuzzes the mesh, vessel-tree, scene, surface and label-map loaders with libFuzzer (clang, AddressSanitizer
 # + UBSan): any crash, sanitizer report or exception other than MeshError/VesselError/SceneError
 # fails the run.
 #   scripts/fuzz.sh [SECONDS_PER_TARGET]   (default 300) the corpus grows in build/fuzz/corpus_*
@@ -30,7 +30,8 @@ build fuzz_scene "$REPO/test/fuzz/fuzz_scene.cpp" "$REPO/src/core/scene/scene.cp
   "$REPO/src/core/geometry/region.cpp" -lyaml-cpp
 build fuzz_surface "$REPO/test/fuzz/fuzz_surface.cpp" "$REPO/src/core/io/surface_io.cpp" "$REPO/src/core/io/vtk_polydata.cpp" \
   "$REPO/src/core/meshing/surface_repair.cpp"
-for target in fuzz_mesh fuzz_vessel fuzz_scene fuzz_surface; do
+build fuzz_label_map "$REPO/test/fuzz/fuzz_label_map.cpp" "$REPO/src/core/io/label_map_io.cpp" -lz
+for target in fuzz_mesh fuzz_vessel fuzz_scene fuzz_surface fuzz_label_map; do
   corpus="$OUT/corpus_${target#fuzz_}"
   [ "$DESCRIPTION" = smoke ] && corpus="$OUT/smoke_${target#fuzz_}" && rm -rf "$corpus"
   mkdir -p "$corpus"

@@ -29,11 +29,19 @@ struct SurfaceRepairs {
   std::vector<std::string> notes;
 };
 
+// A defect of the surface's topology or geometry (a hole, a non-manifold edge or vertex, a
+// non-orientable or self-crossing surface, several shells) that a new surface from the enclosed
+// volume can mend (resurface.h), unlike an unreadable or absurd input.
+class SurfaceDefectError : public MeshError {
+ public:
+  using MeshError::MeshError;
+};
+
 // Merges duplicate vertices, drops collapsed and duplicate triangles and unused vertices,
 // orients every triangle consistently with the normals pointing out of the enclosed volume.
 // Throws MeshError naming `origin`, the defect and where it is (indices of the input's triangles
 // and vertices, coordinates) for: no triangles, a non-finite coordinate, an index out of range,
-// coordinates too large to handle in double precision, an open boundary (an edge of one triangle
+// coordinates too large to handle in double precision; SurfaceDefectError for an open boundary (an edge of one triangle
 // only), a non-manifold edge (three or more triangles) or vertex (two sheets touching at a point),
 // a non-orientable shell, several disconnected shells (unless keep_largest_shell), two triangles
 // crossing each other (self-intersection) or folded onto each other across their edge.

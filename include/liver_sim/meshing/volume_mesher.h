@@ -20,7 +20,20 @@ struct VolumeMeshOptions {
   double feature_angle = 40;    // degrees: surface creases sharper than this stay edges of the mesh
   double max_deviation = 0.5e-3;  // m, > 0: edges on curved parts shortened (down to a quarter of the
                                   // size) so that they bulge at most this far from the surface
+  // > 0: a surface gmsh splits into more patches than this at the feature angle is taken for
+  // stair-steps or noise, refused with RoughSurfaceError before any meshing (re-surface it)
+  int max_patches = 0;
+  // The surface is smooth and has no crease (a re-surfaced segmentation, a level set): it is
+  // remeshed here at the curvature sizes (surface_remesh.h) and filled as it is, without gmsh's
+  // patches, whose parametrisation of such surfaces fails or cuts thin rims.
+  bool remesh_boundary = false;
+  double gradation = 0.3;  // remesh_boundary: sizes grow at most this much per length along the surface
   std::function<void(const std::string&)> progress;  // one line per stage, e.g. "meshing volume"
+};
+
+class RoughSurfaceError : public MeshError {
+ public:
+  using MeshError::MeshError;
 };
 
 struct VolumeMeshReport {
@@ -31,8 +44,14 @@ struct VolumeMeshReport {
 
 // `surface`: closed, manifold, outward-oriented, in metres (repair_surface's output). Returns
 // positively oriented tetrahedra (checked). Throws MeshError naming `origin` with gmsh's message when gmsh
-// fails.
+// fails, RoughSurfaceError (see max_patches).
 TetMesh mesh_volume(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
                     VolumeMeshReport* report = nullptr);
+
+// The volume inside `boundary` filled with tetrahedra (gmsh's Delaunay and optimiser) whose
+// boundary triangles are `boundary`'s own: no patches, no parametrisation, so the shape is the
+// one given (surface_remesh.h makes such a boundary). Inside, sizes grow from the boundary's
+// edges up to `max_size` (m). Throws MeshError naming `origin` with gmsh's message.
+TetMesh fill_volume(const SurfaceMesh& boundary, double max_size, const std::string& origin);
 
 }  // namespace liver_sim

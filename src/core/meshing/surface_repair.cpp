@@ -58,6 +58,7 @@ class SurfaceChecker {
 
   SurfaceMesh run() {
     check_input();
+    checked_input_ = true;
     merge_vertices();
     collect_triangles();
     build_edges();
@@ -69,7 +70,10 @@ class SurfaceChecker {
   }
 
  private:
-  [[noreturn]] void refuse(const std::string& message) const { throw MeshError(origin_ + ": " + message); }
+  [[noreturn]] void refuse(const std::string& message) const {
+    if (checked_input_) throw SurfaceDefectError(origin_ + ": " + message);
+    throw MeshError(origin_ + ": " + message);
+  }
   Eigen::Vector3d point(int v) const { return in_.V.row(v).transpose(); }
   std::string vertex(int v) const { return "vertex " + std::to_string(v) + " at " + at(point(v)); }
   std::string triangle(int t) const { return "triangle " + std::to_string(source_[t]); }
@@ -454,6 +458,7 @@ class SurfaceChecker {
   SurfaceRepairs& repairs_;
   Eigen::Vector3d lo_;
   double diagonal_ = 0;
+  bool checked_input_ = false;  // past the input's own checks: what is refused now is a defect
   std::vector<int> rep_;                  // per input vertex: the vertex it merged into
   std::vector<std::array<int, 3>> faces_;  // kept triangles (input vertex indices)
   std::vector<int> source_;               // per kept triangle: its index in the input

@@ -9,6 +9,7 @@
 #include <optional>
 #include <vector>
 
+#include "liver_sim/meshing/surface_remesh.h"
 #include "liver_sim/meshing/surface_repair.h"
 
 namespace liver_sim {
@@ -138,12 +139,8 @@ struct SizingFailure {
   std::string message;
 };
 
-// One gmsh session from the input triangles to the tetrahedra.
-TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
-                        double h, bool curvature_sizing, VolumeMeshReport& r,
-                        const std::function<void(const std::string&)>& progress) {
-  GmshSession session;
-  gmsh::model::add("liver");
+// The surface's nodes and triangles as one discrete surface of the current gmsh model; its tag.
+int add_discrete_surface(const SurfaceMesh& surface) {
   const int patch = gmsh::model::addDiscreteEntity(2);
   std::vector<std::size_t> node_tags(surface.V.rows());
   std::iota(node_tags.begin(), node_tags.end(), std::size_t{1});
@@ -156,6 +153,16 @@ TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, c
   for (Eigen::Index t = 0; t < surface.F.rows(); ++t)
     for (int k = 0; k < 3; ++k) corners[3 * t + k] = static_cast<std::size_t>(surface.F(t, k)) + 1;
   gmsh::model::mesh::addElementsByType(patch, 2, triangle_tags, corners);
+  return patch;
+}
+
+// One gmsh session from the input triangles to the tetrahedra.
+TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
+                        double h, bool curvature_sizing, VolumeMeshReport& r,
+                        const std::function<void(const std::string&)>& progress) {
+  GmshSession session;
+  gmsh::model::add("liver");
+  add_discrete_surface(surface);
 
   progress("classifying the surface (" + std::to_string(surface.F.rows()) + " triangles) into patches");
   gmsh::model::mesh::classifySurfaces(options.feature_angle * M_PI / 180.0, true, true, M_PI);
@@ -164,6 +171,9 @@ TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, c
     throw MeshError(origin + ": gmsh could not make patches of the surface: " + error);
   std::vector<std::pair<int, int>> surfaces;
   gmsh::model::getEntities(surfaces, 2);
+  if (options.max_patches > 0 && static_cast<int>(surfaces.size()) > options.max_patches)
+    throw RoughSurfaceError(origin + ": stair-steps or noise: the surface splits into " + std::to_string(surfaces.size()) +
+                            " patches at the feature angle (a smooth liver: a few)");
   std::vector<int> surface_tags;
   for (const auto& [dim, tag] : surfaces) surface_tags.push_back(tag);
   const int loop = gmsh::model::geo::addSurfaceLoop(surface_tags);
@@ -192,13 +202,62 @@ TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, c
     std::vector<std::size_t> tets, tet_nodes;
     gmsh::model::mesh::getElementsByType(4, tets, tet_nodes);
     const double n = static_cast<double>(tets.size());
-    // Up to two corrections when the count was asked for and missed by more than 15%.
-    if (options.element_size > 0 || corrections == 2 || n == 0 || std::abs(n / options.target_elements - 1.0) <= 0.15)
+    // Up to four corrections when the count was asked for and missed by more than 15%.
+    if (options.element_size > 0 || corrections == 4 || n == 0 || std::abs(n / options.target_elements - 1.0) <= 0.15)
       break;
     h *= std::cbrt(n / options.target_elements);
     gmsh::model::mesh::clear();
   }
   return extract(origin);
+}
+
+// The surface remeshed at sizes from its curvature and thickness (at most h) and filled. When the
+// count misses, h is corrected along the count's power law in h as the last two passes measured
+// it (the boundary's curvature-bound edges make it flatter than h^-3; h^-3 for the first step).
+TetMesh remesh_and_fill(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
+                        double h, VolumeMeshReport& r, const std::function<void(const std::string&)>& progress) {
+  double last_h = 0, last_n = 0;
+  // Past twice the size the count asks of a uniform mesh, the inside's tetrahedra grow too large
+  // for the boundary's: poorly shaped, stiff in the model. The count is missed instead.
+  const double largest = 2 * h;
+  for (int corrections = 0;; ++corrections) {
+    ++r.passes;
+    r.element_size = h;
+    r.curvature_sizing = true;
+    // The shortest edge: one whose bulge on a bend of radius `deviation` is half of it; a
+    // re-surfaced surface, blurred, bends no tighter.
+    const double shortest = std::min(4 * options.max_deviation, h);
+    progress("remeshing the surface (" + std::to_string(surface.F.rows()) + " triangles) at " +
+             std::to_string(shortest * 1e3) + "-" + std::to_string(h * 1e3) + " mm (pass " + std::to_string(r.passes) + ")");
+    RemeshOptions remesh;
+    remesh.deviation = options.max_deviation;
+    remesh.min_size = shortest;
+    std::vector<double> sizes = curvature_sizes(surface, options.max_deviation, shortest, h, options.gradation);
+    SurfaceMesh boundary;
+    // Where the remeshed sheets still cross (a gap the thickness bound underestimated), shorter
+    // edges everywhere, twice at most; then the crossing is reported where it is.
+    for (int retry = 0;; ++retry) {
+      boundary = remesh_surface(surface, sizes, remesh, origin);
+      try {
+        repair_surface(boundary, origin + " (remeshed)");  // closed, manifold, not crossing itself
+        break;
+      } catch (const SurfaceDefectError& e) {
+        if (retry == 2) throw;
+        progress(std::string(e.what()) + ": remeshing with edges 0.7 times as long");
+        for (double& size : sizes) size *= 0.7;
+      }
+    }
+    progress("filling the volume (" + std::to_string(boundary.F.rows()) + " boundary triangles)");
+    TetMesh m = fill_volume(boundary, h, origin);
+    const double n = static_cast<double>(m.T.rows());
+    if (options.element_size > 0 || corrections == 4 || std::abs(n / options.target_elements - 1.0) <= 0.15 ||
+        (h >= largest && n > options.target_elements))
+      return m;
+    double exponent = last_n > 0 && n != last_n ? std::log(n / last_n) / std::log(h / last_h) : -3;
+    exponent = std::clamp(exponent, -3.0, -0.75);  // steps of at most (n / target)^(4/3) in h
+    last_h = h, last_n = n;
+    h = std::min(largest, h * std::pow(options.target_elements / n, 1 / exponent));
+  }
 }
 
 }  // namespace
@@ -215,6 +274,11 @@ TetMesh mesh_volume(const SurfaceMesh& surface, const std::string& origin, const
   }
   if (!(h > 0) || !std::isfinite(h)) throw MeshError(origin + ": no valid element size");
   VolumeMeshReport r;
+  if (options.remesh_boundary) {
+    TetMesh m = remesh_and_fill(surface, origin, options, h, r, progress);
+    if (report) *report = r;
+    return m;
+  }
   try {
     TetMesh m;
     try {
@@ -229,6 +293,24 @@ TetMesh mesh_volume(const SurfaceMesh& surface, const std::string& origin, const
     if (report) *report = r;
     return m;
   } catch (const std::string& message) {  // gmsh's exceptions outside its parallel regions
+    throw MeshError(origin + ": gmsh: " + message);
+  }
+}
+
+TetMesh fill_volume(const SurfaceMesh& boundary, double max_size, const std::string& origin) {
+  if (!(max_size > 0) || !std::isfinite(max_size)) throw MeshError(origin + ": no valid element size");
+  try {
+    GmshSession session;
+    gmsh::model::add("liver");
+    const int patch = add_discrete_surface(boundary);
+    // A discrete surface without a parametrisation keeps its triangles: only the volume is meshed.
+    gmsh::model::geo::addVolume({gmsh::model::geo::addSurfaceLoop({patch})});
+    gmsh::model::geo::synchronize();
+    gmsh::option::setNumber("Mesh.MeshSizeMax", max_size);
+    gmsh::model::mesh::generate(3);
+    if (const std::string error = gmsh_error(); !error.empty()) throw MeshError(origin + ": gmsh: " + error);
+    return extract(origin);
+  } catch (const std::string& message) {
     throw MeshError(origin + ": gmsh: " + message);
   }
 }

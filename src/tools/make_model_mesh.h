@@ -1,0 +1,45 @@
+// make_model's way from the input to a tetrahedral mesh: a surface repaired and meshed as it is,
+// or re-surfaced from its enclosed volume when it cannot be (--resurface auto: holes, crossings,
+// non-manifold parts, stair-steps that split it into many patches, a gmsh failure or a missed
+// target on it); a label map always re-surfaced. Then the targets checked: the smallest dihedral
+// angle and the element count.
+#pragma once
+
+#include <functional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "liver_sim/geometry/mesh.h"
+#include "liver_sim/geometry/mesh_quality.h"
+#include "liver_sim/geometry/surface_mesh.h"
+#include "liver_sim/meshing/resurface.h"
+#include "liver_sim/meshing/sliver_repair.h"
+#include "liver_sim/meshing/surface_repair.h"
+#include "liver_sim/meshing/volume_mesher.h"
+#include "make_model_options.h"
+
+namespace liver_sim {
+
+struct ModelMesh {
+  std::string input_name;          // the --surface or --label-map file
+  Eigen::Index input_triangles = 0;  // 0 for a label map
+  SurfaceMesh input;               // the surface as read (LPS, m); empty for a label map
+  int label = 0;                   // the label taken from a label map
+  SurfaceMesh surface;             // the surface meshed (repaired, or re-surfaced)
+  SurfaceRepairs repairs;
+  bool resurfaced = false;
+  std::string resurface_reason;    // why (the defect, gmsh's message, the target missed)
+  ResurfaceReport resurfacing;
+  TetMesh mesh;
+  VolumeMeshReport mesh_report;
+  SliverRepairReport slivers;      // when gmsh's mesh missed --min-dihedral
+  TetQuality quality;
+  std::string missed;              // the targets missed and why; empty when all are met
+  std::vector<std::pair<std::string, double>> times;  // stage, s
+};
+
+// Throws MeshError (bad input, with the file and the defect) or CommandLineError.
+ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::string&)>& say);
+
+}  // namespace liver_sim
