@@ -1,22 +1,35 @@
 #include "frame_pacing.h"
 
+#include <thread>
+
 namespace liver_sim {
 
 FramePacing::FramePacing(double rate, double publish_rate)
-    : clock_(1.0 / rate, FrameClock::kCatchUp), rate_(rate), publish_rate_(publish_rate), next_publish_(Clock::now()) {}
+    : rate_(rate), publish_rate_(publish_rate), last_start_(Clock::now()), last_input_start_(last_start_),
+      next_publish_(last_start_) {}
 
 void FramePacing::set_rates(double rate, double publish_rate) {
-  clock_.set_period(1.0 / rate);
   rate_ = rate;
   publish_rate_ = publish_rate;
+}
+
+FramePacing::Clock::duration FramePacing::period(double hz) const {
+  return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / hz));
+}
+
+bool FramePacing::until_next_frame(const WaitForInput& wait_for_input) {
+  const bool input = wait_for_input(last_start_ + period(rate_));
+  if (input) std::this_thread::sleep_until(last_input_start_ + period(rate_));
+  last_start_ = Clock::now();
+  if (input) last_input_start_ = last_start_;
+  return input;
 }
 
 bool FramePacing::publish_due() {
   const Clock::time_point now = Clock::now();
   if (now < next_publish_) return false;
-  const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / publish_rate_));
-  next_publish_ += period;
-  if (next_publish_ < now) next_publish_ = now + period;  // fell behind: no burst
+  next_publish_ += period(publish_rate_);
+  if (next_publish_ < now) next_publish_ = now + period(publish_rate_);  // fell behind: no burst
   return true;
 }
 

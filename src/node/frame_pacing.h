@@ -1,31 +1,36 @@
-// When the node's frames start and when it publishes, in one place: frames on a fixed grid of
-// slots one period of ~rate apart (FrameClock: a late frame's slots are caught up, a held-up
-// one's dropped), the mesh and an idle status at most at ~publish_rate, without a burst after
-// the loop fell behind.
+// When the node's frames start and when it publishes, in one place. A frame starts as soon as
+// an input arrives (a pose, a cloud, a command), so that a pose's latency is the frame's
+// compute, but input frames at most ~rate a second (a faster stream is sampled: the latest of
+// each input wins). Without input a frame starts one period of ~rate after the last one: a
+// step still converging goes on, tf-driven instruments are read, stale ones noticed. The mesh
+// goes out after the frames that moved it, at most ~publish_rate a second on average.
 #pragma once
 
 #include <chrono>
-
-#include "liver_sim/runtime/frame_clock.h"
+#include <functional>
 
 namespace liver_sim {
 
 class FramePacing {
  public:
+  using Clock = std::chrono::steady_clock;
+  // Waits until an input arrives (true) or the deadline (false).
+  using WaitForInput = std::function<bool(Clock::time_point)>;
+
   FramePacing(double rate, double publish_rate);
   // From the next frame on (Hz).
   void set_rates(double rate, double publish_rate);
   double rate() const { return rate_; }
+  // Until the next frame may start (see above); returns whether an input starts it.
+  bool until_next_frame(const WaitForInput& wait_for_input);
   // Whether the mesh (and an idle status) is due now; when it is, the next is a publishing
   // period later.
   bool publish_due();
-  // Until the next frame's slot.
-  void sleep() { clock_.sleep(); }
 
  private:
-  using Clock = std::chrono::steady_clock;
-  FrameClock clock_;
+  Clock::duration period(double hz) const;
   double rate_, publish_rate_;
+  Clock::time_point last_start_, last_input_start_;
   Clock::time_point next_publish_;
 };
 

@@ -37,6 +37,7 @@ SessionOptions session_options(const NodeOptions& o) {
   SessionOptions s;
   s.analysis_period = o.uncertainty_period;
   s.test_fault_every = o.test_fault_every;
+  s.helper_processors = o.helper_processors;
   // The default instrument `tool` and one per ~instrument_frames: rods with a hemispherical tip
   // (a sphere alone pressed deeper than its radius would let the tissue close over it).
   InstrumentOptions tool;
@@ -112,7 +113,7 @@ void LiverSimNode::run() {
       fault("in the loop: exception of unknown type");
     }
     status_->frame_ended();
-    pacing_.sleep();
+    pacing_.until_next_frame([this](FramePacing::Clock::time_point deadline) { return session_->wait_for_input(deadline); });
   }
 }
 

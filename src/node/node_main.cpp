@@ -27,6 +27,14 @@ int main(int argc, char** argv) {
     ROS_FATAL("liver_sim: %s", error.c_str());
     return 1;
   }
+  // The processors the simulation leaves (all of them when it leaves none): the callbacks, the
+  // services and the background work (factor refreshes, analyses) run there.
+  std::vector<int> others;
+  for (int cpu : processors)
+    if (std::find(options.cpu_affinity.begin(), options.cpu_affinity.end(), cpu) == options.cpu_affinity.end())
+      others.push_back(cpu);
+  if (others.empty()) others = processors;
+  if (!options.cpu_affinity.empty()) options.helper_processors = others;
   // The simulation thread (this one): its processors and its scheduling, set before the model is
   // built so that the model's helper threads inherit them. Refused settings leave it as it was.
   if (!options.cpu_affinity.empty()) {
@@ -46,17 +54,12 @@ int main(int argc, char** argv) {
     ROS_FATAL("liver_sim: %s", e.what());
     return 1;
   }
-  // Callbacks and services run beside the simulation loop, at normal priority, on the processors
-  // the simulation leaves (all of them when it leaves none): their threads inherit both from the
-  // thread that starts them.
+  // Callbacks and services run beside the simulation loop, at normal priority, on the others:
+  // their threads inherit both from the thread that starts them.
   ros::AsyncSpinner spinner(2);
   std::thread([&] {
-    std::vector<int> others;
-    for (int cpu : processors)
-      if (std::find(options.cpu_affinity.begin(), options.cpu_affinity.end(), cpu) == options.cpu_affinity.end())
-        others.push_back(cpu);
     liver_sim::set_realtime_priority(0);
-    liver_sim::pin_calling_thread(others.empty() ? processors : others);
+    liver_sim::pin_calling_thread(others);
     spinner.start();
     node->start_heartbeat();
   }).join();

@@ -17,7 +17,7 @@ struct NodeOptions {
   std::string parent_frame;           // the OR's frame the model frame hangs from (empty: none)
   std::vector<double> parent_transform{0, 0, 0, 0, 0, 0, 1};  // [x, y, z (m), qx, qy, qz, qw]
   double rate = 30;                   // Hz, [1, 1000]: frames a second
-  double publish_rate = 15;           // Hz, [0.1, 100]: meshes a second
+  double publish_rate = 30;           // Hz, [0.1, 100]: meshes a second at most
   double step_time_budget = 1.0 / 30; // s, > 0
   bool budget_follows_rate = true;    // neither ~step_time_budget nor ~solver/time_budget: one frame of ~rate
   int test_fault_every = 0;           // >= 0 (test hook)
@@ -38,6 +38,9 @@ struct NodeOptions {
   std::vector<int> cpu_affinity;      // processors of the simulation thread; empty: any
   int realtime_priority = 0;          // [0, 99]; 0: normal
   double thread_slice = 1e-4;         // s, 0 or [1e-4, 0.1]
+  // Not a parameter: with ~cpu_affinity, the processors it leaves, where the background work
+  // runs (SessionOptions::helper_processors); empty: beside the simulation.
+  std::vector<int> helper_processors;
 };
 
 // Reads every parameter; throws std::invalid_argument naming the first one out of its bounds.

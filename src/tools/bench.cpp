@@ -8,7 +8,7 @@
 // a residual of 1e-10).
 //   bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]
 //         [--frequency F] [--strategy SPEC]... [--threads N,...] [--load N,...] [--realtime-priority P]
-//         [--paced] [--csv FILE] [--quiet]
+//         [--paced] [--node-placement] [--csv FILE] [--quiet]
 // SPEC is STRATEGY[:ITERATIONS[:TOLERANCE]]: the solver.strategy, the Newton iterations allowed
 // per frame (solver.max_iterations) and the residual tolerance (solver.tolerance; 0 means "always
 // do ITERATIONS"). Each strategy runs once per thread count of --threads (solver.threads,
@@ -93,6 +93,9 @@ struct Loading {
   std::vector<liver_sim::InstrumentOptions> instruments;  // added to the scene's
   int realtime_priority = 0;  // of the timed runs' threads (SCHED_FIFO), 0: normal scheduling
   bool paced = false;         // frames start on their slots of solver.dt, as the node's loop
+  // The frames on the first processor this process may use, the background factorisations on
+  // the others, as the node with ~cpu_affinity places them.
+  bool node_placement = false;
 };
 
 // Threads that keep processors busy while frames are timed, as a compiler or another program
@@ -166,7 +169,25 @@ Run run(const std::string& scene_path, std::vector<std::string> overrides, const
     }
     ~Priority() { liver_sim::set_realtime_priority(0); }
   } priority(loading.realtime_priority);
+  // Placed as the node: this thread (and the model's helpers, which inherit it) on the first
+  // processor, the background on the rest; restored after the run.
+  struct Placement {
+    explicit Placement(bool on) : all(liver_sim::processors_of_calling_thread()) {
+      if (!on) return;
+      if (all.size() < 2) throw std::runtime_error("--node-placement needs two processors (taskset -c 0,1)");
+      frames = {all.front()};
+      background.assign(all.begin() + 1, all.end());
+      const std::string refused = liver_sim::pin_calling_thread(frames);
+      if (!refused.empty()) throw std::runtime_error("--node-placement: " + refused);
+    }
+    ~Placement() { liver_sim::pin_calling_thread(all); }
+    std::vector<int> all, frames, background;
+  } placement(loading.node_placement);
   LiverModel model(liver_sim::load_scene_mesh(scene), scene);
+  if (!placement.background.empty()) {
+    const std::string refused = model.stepper().place_background(placement.background);
+    if (!refused.empty()) throw std::runtime_error("--node-placement: " + refused);
+  }
   model.set_positions(start);
   Run r;
   r.tets = model.mesh().T.rows();
@@ -223,7 +244,8 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
   tool::describe(app,
                  "usage: bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]\n"
                  "             [--frequency HZ] [--strategy STRATEGY[:ITERATIONS[:TOLERANCE]]]... [--threads N,...]\n"
-                 "             [--load N,...] [--realtime-priority P] [--paced] [--csv FILE] [--quiet]\n");
+                 "             [--load N,...] [--realtime-priority P] [--paced] [--node-placement]\n"
+                 "             [--csv FILE] [--quiet]\n");
   app.add_option("--scene", o->scene, "YAML scene (README, 'Scene format'); required")->option_text("FILE")->required();
   app.add_option("--instruments", o->instruments,
                  "YAML file with an instruments: list in the scene format, moving along\n"
@@ -273,6 +295,10 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
   app.add_flag("--paced", o->loading.paced,
                "each frame starts on its slot of solver.dt of wall time, a late one at once,\n"
                "as in the node (default: back to back); for solver.background_refresh");
+  app.add_flag("--node-placement", o->loading.node_placement,
+               "the frames on the first processor this process may use, the background\n"
+               "factorisations on the others, as the node with ~cpu_affinity (run it under\n"
+               "taskset -c 0,1)");
   app.add_option("--csv", o->csv, "write the CSV rows (one per run) to FILE instead of standard output")
       ->option_text("FILE");
   app.add_flag("--quiet", o->quiet, "no progress on standard error");

@@ -173,6 +173,42 @@ TEST(TrackingSession, NamedInstrumentsTakeSlotsGoStaleAndAreReleasedOnReset) {
   EXPECT_EQ(session.model().positions(), rest);
 }
 
+TEST(TrackingSession, AnInputWakesTheFrameWaitUntilTheFrameTakesIt) {
+  // The node starts a frame when an input arrives (frame_pacing.h): every kind of input wakes
+  // the wait, and a frame takes what came before it. Guards against an input kind that does
+  // not wake it (a pose then waits for the next tick) and against advance() not taking them
+  // (the node would run frames back to back). Mutation killed (tried): submit(Cloud) without
+  // the wake.
+  SessionOptions o;
+  const Scene scene = probe_cube();
+  TrackingSession session(load_scene_mesh(scene), scene, o);
+  const auto now = [] { return InputSignal::Clock::now(); };
+  session.advance();
+  EXPECT_FALSE(session.wait_for_input(now()));
+  InstrumentRequest declare;
+  declare.name = "pointer";
+  declare.type = "probe";
+  declare.radius = 0.002;
+  const std::vector<std::function<void()>> inputs = {
+      [&] { ASSERT_TRUE(session.submit(declare)); },
+      [&] { session.submit(InstrumentPose{"pointer", Eigen::Vector3d(0, 0, 0.05), Eigen::Quaterniond::Identity(), 1, 1}); },
+      [&] { session.submit(Cloud{}); },
+      [&] { session.submit(Reset{}); },
+      [&] { session.submit(AlignRigidly{}); },
+      [&] { session.submit(session.live_options()); },
+      [&] {
+        CapsuleOptions c;
+        ASSERT_EQ(session.submit(CapsuleEdit{true, 0, 0, 0}, c), "");
+      },
+  };
+  for (size_t i = 0; i < inputs.size(); ++i) {
+    inputs[i]();
+    EXPECT_TRUE(session.wait_for_input(now())) << "input " << i;
+    session.advance();
+    EXPECT_FALSE(session.wait_for_input(now())) << "input " << i << " taken by the frame";
+  }
+}
+
 TEST(TrackingSession, RefusedInputsAreCountedAndChangeNothing) {
   // A capsule out of bounds, an unknown instrument's change, a pose the shape refuses, live
   // options the model refuses: each counted, the model as it was. Guards against: a

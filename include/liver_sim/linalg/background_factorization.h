@@ -31,6 +31,8 @@ class BackgroundFactorization {
   void cancel() { job_.cancel(); }
   // None in progress, none waiting to be taken.
   bool idle() const { return job_.idle(); }
+  // Its thread on these processors (BackgroundJob::place).
+  std::string place(const std::vector<int>& cpus) { return job_.place(cpus); }
 
  private:
   CholmodSolver solver_;

@@ -63,6 +63,9 @@ class UncertaintyWorker {
   // (candidate supports, the tissue's stiffness) solve with it.
   StateCompliance& compliance() { return compliance_; }
 
+  // Its thread on these processors (BackgroundJob::place): "" or why not.
+  std::string place(const std::vector<int>& cpus) { return job_.place(cpus); }
+
  private:
   void analyse();  // the job, on the thread
 

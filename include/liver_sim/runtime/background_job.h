@@ -9,7 +9,9 @@
 #include <condition_variable>
 #include <functional>
 #include <mutex>
+#include <string>
 #include <thread>
+#include <vector>
 
 namespace liver_sim {
 
@@ -48,6 +50,9 @@ class BackgroundJob {
   void cancel();
   // No job in progress, none waiting to be taken.
   bool idle() const;
+  // Runs the thread on these processors from now on (pin_thread: "" or why not). Unplaced it
+  // runs where the thread that made it runs.
+  std::string place(const std::vector<int>& cpus);
 
  private:
   void run();

@@ -83,6 +83,8 @@ class WorkerPool {
 std::vector<int> processors_of_calling_thread();
 // Runs the thread only on these processors.
 std::string pin_calling_thread(const std::vector<int>& cpus);
+// The same for another thread of the process.
+std::string pin_thread(std::thread& thread, const std::vector<int>& cpus);
 // Real-time scheduling (SCHED_FIFO) at a priority in [1, 99]: the thread then runs whenever it is
 // ready, ahead of every normally scheduled thread (a build, a viewer); needs CAP_SYS_NICE or an
 // RLIMIT_RTPRIO at least that high. 0: normal scheduling (SCHED_OTHER).

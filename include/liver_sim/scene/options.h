@@ -106,7 +106,8 @@ struct SolverOptions {
   // or instrument stage in progress, NotConverged, and the next step continues from its iterate
   // (newton_stepper.h). The first iteration of a step always runs, so that frames progress.
   double time_budget = std::numeric_limits<double>::infinity();
-  // ModifiedNewton: a refresh the contraction asks for is factorised on a thread of its own at a
+  // The strategies that keep a factor (modified Newton, Newton-Krylov, reused-factor CG): a
+  // refresh their judgement of the factor asks for is factorised on a thread of its own at a
   // lower priority while the iterations go on with the old factor, and replaces it when done
   // (background_factorization.h); the other refreshes (the first factor, a changed model, an
   // iteration without descent) stay in the step. Results then depend on timing. The other

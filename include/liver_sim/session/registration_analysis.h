@@ -49,6 +49,8 @@ class RegistrationAnalysis {
   void reset();                            // a reset: nothing due, no covariances, a running one void
   void set_capsule(const CapsuleOptions& capsule);  // of the models analysed from the next start on
   void want_covariances() { want_covariances_ = true; }  // in frame: the next analysis makes them
+  // Background: the analyses on these processors ("" or why not; in frame: nothing to place).
+  std::string place(const std::vector<int>& cpus) { return worker_ ? worker_->place(cpus) : ""; }
 
   // Simulation thread, after a step that kept its state: starts an analysis when one is due and
   // the period since the last start has passed; in frame, runs it and adopts it.

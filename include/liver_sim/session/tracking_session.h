@@ -4,8 +4,9 @@
 // named instruments (instrument_slots.h).
 //
 // Any thread submits inputs: each is kept as the latest of its kind (a cloud, each instrument's
-// pose, a reset, a capsule change, live options), so nothing queues. The simulation thread calls
-// advance() once a frame: it applies what was submitted, then steps when there is something to
+// pose, a reset, a capsule change, live options), so nothing queues, and wakes the simulation
+// thread if it waits for one (wait_for_input). The simulation thread calls advance() once a
+// frame: it applies what was submitted, then steps when there is something to
 // do (a new input, a step that has not converged, a cloud still being registered, estimates the
 // analysis changed), behind the barrier, and reports what the frame did. A step that fails is a
 // counted fault and the model keeps its last good state.
@@ -20,6 +21,7 @@
 #include <vector>
 
 #include "liver_sim/registration/registration.h"
+#include "liver_sim/runtime/input_signal.h"
 #include "liver_sim/session/inputs.h"
 #include "liver_sim/session/instrument_slots.h"
 #include "liver_sim/session/notices.h"
@@ -44,6 +46,9 @@ struct SessionOptions {
   InstrumentSlots::Settings instruments;
   int test_fault_every = 0;      // StepGuard::set_test_fault_every
   Eigen::VectorXd start;         // positions the model starts from (3 #V, m); empty: its rest shape
+  // Processors of the background work (factor refreshes, analyses); empty: the simulation
+  // thread's. A refusal is told (Notices) and leaves them there.
+  std::vector<int> helper_processors;
   // The frames' clocks, read where a frame needs them (staleness, the analysis's period and stamp).
   std::function<FrameTime()> clock = [] { return FrameTime(); };
 };
@@ -71,9 +76,9 @@ class TrackingSession {
   TrackingSession(TetMesh mesh, const Scene& scene, SessionOptions options, Notices::Sink sink = nullptr);
 
   // --- Any thread: the latest input of each kind, applied at the start of the next frame.
-  bool submit(const InstrumentRequest& c) { return slots_.command(c); }  // false: refused
-  void submit(const InstrumentPose& p) { slots_.pose(p); }
-  void submit(const FramePose& p) { slots_.frame_pose(p, options_.clock().stamp); }
+  bool submit(const InstrumentRequest& c);  // false: refused
+  void submit(const InstrumentPose& p);
+  void submit(const FramePose& p);
   void submit(Cloud cloud);
   void submit(const Reset& reset);       // drops a cloud not yet registered and an alignment asked for
   void submit(const AlignRigidly&);      // applies to the next cloud
@@ -85,6 +90,9 @@ class TrackingSession {
   void refuse(const std::string& why) { notices_.refuse(why); }
 
   // --- Simulation thread.
+  // Until an input is submitted (true; at once when one was since the last advance()) or the
+  // deadline (false).
+  bool wait_for_input(InputSignal::Clock::time_point deadline) { return input_.wait_until(deadline); }
   FrameReport advance();
   // A fault met outside advance() (publishing): counted, and the state says so.
   void count_fault(const std::string& text);
@@ -150,6 +158,7 @@ class TrackingSession {
   std::optional<CapsuleOptions> pending_capsule_;
   CapsuleOptions capsule_;  // the model's, or the request the simulation thread is applying
   std::optional<LiveOptions> pending_live_;
+  InputSignal input_;
 };
 
 const char* state_word(SessionState s);  // "idle", "converged", "iterating", "diverged", "fault"

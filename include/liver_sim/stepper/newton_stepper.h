@@ -78,6 +78,8 @@ class NewtonStepper {
   void model_changed(bool refactorize);
   // The next Newton iteration factorises the matrix afresh.
   void refactorize() { factor_.drop(); }
+  // The processors of the background refreshes (TangentFactor::place_background).
+  std::string place_background(std::vector<int> cpus) { return factor_.place_background(std::move(cpus)); }
   // Back to the rest shape, zero velocity, time 0.
   void reset();
 

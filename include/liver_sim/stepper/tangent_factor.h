@@ -48,6 +48,9 @@ class TangentFactor {
   void start_background();
   // Turned off: a refresh asked for and not yet taken up happens in the step, as without it.
   void stop_background();
+  // The background factorisations on these processors (from now on, and if the thread starts
+  // later); empty: where the stepping thread runs. "" or why the system refused.
+  std::string place_background(std::vector<int> cpus);
   // At the start of an iteration: a finished background factor replaces the one in use; a
   // wanted one starts from the matrix assembled where the state was last evaluated, if the
   // thread is free.
@@ -70,6 +73,7 @@ class TangentFactor {
   long factorizations_ = 0;  // factors made in the step or taken up from the background
   std::unique_ptr<BackgroundFactorization> background_;  // while background_refresh was ever on
   long background_starts_ = 0;
+  std::vector<int> background_cpus_;
   Clock::duration factorization_time_{};  // of the last factorisation in the step
 };
 

@@ -26,8 +26,11 @@ bool BackgroundJob::idle() const {
   return state_ == State::Idle;
 }
 
+std::string BackgroundJob::place(const std::vector<int>& cpus) { return pin_thread(thread_, cpus); }
+
 void BackgroundJob::run() {
-  // Its processors stay the caller's: on a shared core the caller's frames come first.
+  // Unless placed, its processors stay the caller's: on a shared core the caller's frames come
+  // first.
   lower_calling_thread_priority();
   std::unique_lock<std::mutex> lock(mutex_);
   for (;;) {

@@ -108,7 +108,9 @@ std::vector<int> processors_of_calling_thread() {
   return cpus;
 }
 
-std::string pin_calling_thread(const std::vector<int>& cpus) {
+namespace {
+
+std::string pin(pthread_t thread, const std::vector<int>& cpus) {
   if (cpus.empty()) return "no processor given";
   cpu_set_t set;
   CPU_ZERO(&set);
@@ -116,9 +118,15 @@ std::string pin_calling_thread(const std::vector<int>& cpus) {
     if (cpu < 0 || cpu >= CPU_SETSIZE) return "processor " + std::to_string(cpu) + " does not exist";
     CPU_SET(cpu, &set);
   }
-  const int error = pthread_setaffinity_np(pthread_self(), sizeof set, &set);
+  const int error = pthread_setaffinity_np(thread, sizeof set, &set);
   return error == 0 ? "" : std::strerror(error);
 }
+
+}  // namespace
+
+std::string pin_calling_thread(const std::vector<int>& cpus) { return pin(pthread_self(), cpus); }
+
+std::string pin_thread(std::thread& thread, const std::vector<int>& cpus) { return pin(thread.native_handle(), cpus); }
 
 std::string set_realtime_priority(int priority) {
   const int high = sched_get_priority_max(SCHED_FIFO);

@@ -38,28 +38,61 @@ TrackingSession::TrackingSession(TetMesh mesh, const Scene& scene, SessionOption
       hold_stale_(options_.instruments.hold_stale),
       capsule_(scene.capsule) {
   guard_.set_test_fault_every(options_.test_fault_every);
+  if (!options_.helper_processors.empty()) {
+    std::string refused = model_->stepper().place_background(options_.helper_processors);
+    if (refused.empty()) refused = analysis_.place(options_.helper_processors);
+    if (!refused.empty()) notices_.tell("background work not placed (" + refused + "); it runs beside the frames");
+  }
+}
+
+bool TrackingSession::submit(const InstrumentRequest& c) {
+  const bool accepted = slots_.command(c);
+  if (accepted) input_.notify();
+  return accepted;
+}
+
+void TrackingSession::submit(const InstrumentPose& p) {
+  slots_.pose(p);
+  input_.notify();
+}
+
+void TrackingSession::submit(const FramePose& p) {
+  slots_.frame_pose(p, options_.clock().stamp);
+  input_.notify();
 }
 
 void TrackingSession::submit(Cloud cloud) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  pending_cloud_ = std::move(cloud);  // replaced, never queued: the latest cloud wins
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pending_cloud_ = std::move(cloud);  // replaced, never queued: the latest cloud wins
+  }
+  input_.notify();
 }
 
 void TrackingSession::submit(const Reset& reset) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  pending_reset_ = reset;
-  align_requested_ = false;
-  pending_cloud_.reset();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pending_reset_ = reset;
+    align_requested_ = false;
+    pending_cloud_.reset();
+  }
+  input_.notify();
 }
 
 void TrackingSession::submit(const AlignRigidly&) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  align_requested_ = true;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    align_requested_ = true;
+  }
+  input_.notify();
 }
 
 void TrackingSession::submit(const LiveOptions& live) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  pending_live_ = live;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pending_live_ = live;
+  }
+  input_.notify();
 }
 
 std::string TrackingSession::submit(const CapsuleEdit& edit, CapsuleOptions& capsule) {
@@ -76,7 +109,10 @@ std::string TrackingSession::submit(const CapsuleEdit& edit, CapsuleOptions& cap
     c = pending_capsule_ ? *pending_capsule_ : capsule_;
   capsule = c;
   lock.unlock();
-  if (!error.empty()) notices_.refuse("set_capsule: " + error);
+  if (!error.empty())
+    notices_.refuse("set_capsule: " + error);
+  else
+    input_.notify();
   return error;
 }
 
@@ -101,6 +137,7 @@ void TrackingSession::count_fault(const std::string& text) {
 
 FrameReport TrackingSession::advance() {
   FrameReport report;
+  input_.take();  // what comes from now on wakes the next wait
   // A value beyond its bounds (std::invalid_argument) is a refused input, anything else a
   // fault; the model stays as it was.
   try {

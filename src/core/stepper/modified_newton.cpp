@@ -16,10 +16,6 @@ class ModifiedNewton final : public UpdateStrategy {
  public:
   using UpdateStrategy::UpdateStrategy;
   SolverOptions::Strategy with_contacts() const override { return SolverOptions::Strategy::ModifiedNewton; }
-  void begin_iteration(StepResult& result) override {
-    if (parts_.solver.background_refresh && parts_.factor.valid())
-      parts_.factor.refresh_in_background(parts_.matrix, result);
-  }
   bool factorizes() const override { return !parts_.factor.valid(); }
   bool current_tangent() const override { return false; }
   int solve(const NewtonIteration& it, Eigen::VectorXd& dx) override { return direct_solve(it, dx); }
@@ -45,12 +41,13 @@ class ModifiedNewton final : public UpdateStrategy {
         if (fixed[i]) asked_[i] = 0;
       asked = asked_.norm();
     }
-    if (end.end_norm > contraction * asked && !end.fresh_factor) {
-      if (parts_.solver.background_refresh)
-        parts_.factor.want_refresh();  // the old factor serves meanwhile
-      else
-        parts_.factor.mark_stale();
-    }
+    if (end.end_norm <= contraction * asked || end.fresh_factor) return;
+    // A factor that no longer contracts at all is not kept waiting for the background (which a
+    // busy processor may hold up for many frames): refreshed in the step.
+    if (end.end_norm > asked)
+      parts_.factor.mark_stale();
+    else
+      refresh();
   }
 
  private:

@@ -29,6 +29,13 @@ bool TangentFactor::factorize(const std::vector<double>& values, StepResult& res
 void TangentFactor::start_background() {
   if (background_) return;
   background_ = std::make_unique<BackgroundFactorization>(pattern_.rows(), pattern_.column_start(), pattern_.row_index());
+  if (!background_cpus_.empty()) background_->place(background_cpus_);  // refused: checked by place_background
+}
+
+std::string TangentFactor::place_background(std::vector<int> cpus) {
+  background_cpus_ = std::move(cpus);
+  if (!background_ || background_cpus_.empty()) return "";
+  return background_->place(background_cpus_);
 }
 
 void TangentFactor::stop_background() {

@@ -37,8 +37,19 @@ int UpdateStrategy::direct_solve(const NewtonIteration& it, Eigen::VectorXd& dx)
   return 0;
 }
 
+void UpdateStrategy::begin_iteration(StepResult& result) {
+  if (parts_.solver.background_refresh && parts_.factor.valid()) parts_.factor.refresh_in_background(parts_.matrix, result);
+}
+
 void UpdateStrategy::judge_preconditioner(int iterations, double relative_residual, double forcing) {
-  if (iterations > kRefactorAfter || relative_residual > forcing) parts_.factor.mark_stale();
+  if (iterations > kRefactorAfter || relative_residual > forcing) refresh();
+}
+
+void UpdateStrategy::refresh() {
+  if (parts_.solver.background_refresh)
+    parts_.factor.want_refresh();
+  else
+    parts_.factor.mark_stale();
 }
 
 }  // namespace liver_sim

@@ -73,7 +73,8 @@ class UpdateStrategy {
   // solve with the factor carry the contact forces in the same solve; the others hand their
   // iterations to Newton-Krylov, which has the factor too.
   virtual SolverOptions::Strategy with_contacts() const { return SolverOptions::Strategy::NewtonKrylov; }
-  virtual void begin_iteration(StepResult&) {}
+  // A refresh finished in the background taken up, one wanted started (background_refresh).
+  virtual void begin_iteration(StepResult& result);
   virtual bool factorizes() const = 0;
   virtual bool current_tangent() const = 0;
   // False when the matrix is not positive definite (the step rolls back).
@@ -91,6 +92,9 @@ class UpdateStrategy {
   // A factor that preconditions an iterative solve poorly (many iterations, or the solve not
   // reaching its tolerance) is refreshed at the next iteration.
   void judge_preconditioner(int iterations, double relative_residual, double forcing);
+  // The factor no longer serves well: refactorised in the step, or with background_refresh on
+  // a thread of its own while it serves meanwhile.
+  void refresh();
   StrategyParts parts_;
 };
 
