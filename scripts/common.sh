@@ -11,7 +11,7 @@ export ROS_HOME="$WS/ros_home" ROS_LOG_DIR="$WS/ros_home/log" ROS_IP=127.0.0.1
 PACKAGES=(
   build-essential cmake catkin libroscpp-dev ros-message-generation ros-message-runtime ros-std-msgs
   libstd-msgs-dev libgeometry-msgs-dev ros-geometry-msgs libsensor-msgs-dev libvisualization-msgs-dev libstd-srvs-dev
-  libdiagnostic-msgs-dev libdiagnostic-updater-dev libtf2-dev libtf2-ros-dev libtf2-geometry-msgs-dev
+  libdiagnostic-msgs-dev libdiagnostic-updater-dev libtf2-dev libtf2-ros-dev libtf2-geometry-msgs-dev libtf2-eigen-dev
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure
   libpcl-conversions-dev libpcl-dev
   libeigen3-dev libsuitesparse-dev libopenblas0-pthread libyaml-cpp-dev
@@ -19,6 +19,8 @@ PACKAGES=(
   python3-rospy python3-rosbag python3-geometry-msgs python3-sensor-msgs python3-std-srvs
   python3-visualization-msgs python3-diagnostic-msgs python3-matplotlib python3-numpy clang libclang-rt-14-dev
   python3-gmsh libgmsh-dev stress-ng
+  # The tools' command lines, JSON output and calibrate's minimiser (header-only).
+  libcli11-dev nlohmann-json3-dev libboost-dev
   # The ROS command-line tools: rostopic, rosservice, rosnode, rosrun, static_transform_publisher.
   python3-rostopic python3-rosservice python3-rosnode rosbash tf2-tools
 )

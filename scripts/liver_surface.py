@@ -6,7 +6,7 @@ triangle counts of a segmented surface (each level multiplies the count by 4 and
   scripts/liver_surface.py MESH OUT.stl [--scale S] [--levels K] [--frame LPS|RAS]
 
 MESH: any mesh gmsh reads (the phantom config/phantom/liver_phantom.msh, in metres; the SOFA
-livers in ../shared/data/sofa-liver, legacy Gmsh in decimetres for liver2). --scale: file unit
+livers in config/sofa_liver, legacy Gmsh in decimetres for liver2). --scale: file unit
 -> output unit (default 1000: metres to millimetres). --frame RAS negates x and y (the mesh is
 taken as LPS, the model frame of make_model). The output is deterministic: the example in
 doc/patient_model.md and the timing runs generate their inputs with it instead of committing

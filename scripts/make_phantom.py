@@ -13,7 +13,7 @@ when written: the mesh is then exactly the mirror of the one gmsh makes from the
 for node, so its physics is the same to round-off.
   config/phantom/sofa_liver_portal.vtk, sofa_liver2_portal.vtk
                                     portal-like trees inside the two external SOFA liver meshes
-                                    (../shared/data/sofa-liver, scales 0.03 and 0.1), when present
+                                    (config/sofa_liver, scales 0.03 and 0.1)
 
 Run: scripts/make_phantom.sh (installs python3-gmsh if missing). The scene that uses these
 files, with the tumour targets and the ligament attachments, is config/scenes/liver_phantom.yaml.
@@ -242,7 +242,7 @@ def main():
     os.makedirs(args.out, exist_ok=True)
     tets = make_mesh(os.path.join(args.out, "liver_phantom.msh"))
     trees = [("portal", portal_tree().reflected()), ("hepatic", hepatic_tree().reflected())]
-    sofa = os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", "..", "shared", "data", "sofa-liver")
+    sofa = os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", "config", "sofa_liver")
     for mesh, scale in (("liver", 0.03), ("liver2", 0.1)):  # file units -> m, as in the tests
         path = os.path.join(sofa, mesh + ".msh")
         if os.path.exists(path):

@@ -12,7 +12,8 @@
 One status line per second (simulation frames per second, the latency from an input's stamp, a
 pose's or a cloud's, to the first mesh marker that shows it, contacts per instrument,
 registration RMS, the tumour's displacement from the pre-operative equilibrium) and a summary at
-the end. Instrument poses are the tips in the model frame (`liver`), +z back along
+the end, with where the probe pressed: it exits 1 unless the pressing probe's tip was within 5 mm
+across from the tumour and above it. Instrument poses are the tips in the model frame (`liver`), +z back along
 the instrument; the camera sees the surface of the intra-operative liver except within 25 mm of
 an instrument's tip (the instruments hide it and deform it in ways the camera's truth does not
 model). SI units; lengths printed in mm.
@@ -44,8 +45,8 @@ POSE_PERIOD = 1 / 30.  # s
 LIFT = 0.015           # m, grasper lift
 PRESS = 0.005          # m, probe press below the surface
 SLIDE = 0.010          # m, probe slide along +x
-PROBE_XY = (0.050, -0.020)  # m, above the tumour
 PROBE_RADIUS = 0.0025  # m
+PRESS_ACROSS_MAX = 0.005  # m: the pressing probe's tip at most this far across from the tumour
 JAW_RADIUS = 0.003     # m
 OCCLUDED = 0.025       # m, no cloud points this near an instrument's tip
 
@@ -232,6 +233,7 @@ def main():
     time.sleep(1.0)  # subscriptions connect
     grasper_dir = np.array([side, 0.0, 1.0]) / math.sqrt(2)  # from the side, above
     probe_dir = np.array([0.0, 0.0, 1.0])
+    probe_xy = tumour_preop[:2].copy()  # the probe presses straight above the tumour
 
     # Timeline (s of session time): phase boundaries.
     T_GRASP, T_CLOSE, T_LIFTED = 6.0, 8.5, 11.5
@@ -258,6 +260,7 @@ def main():
     rows = []
     closed = False
     grasper_max = probe_max = 0.0
+    press = []  # while the probe presses: (its contacts, tip to tumour across (m), tip above the tumour (m))
     sent_clouds = 0
     while not rospy.is_shutdown():
         now = time.time()
@@ -293,9 +296,9 @@ def main():
             if T_PROBE <= t < T_OUT + 1.0:
                 if probe_top is None:
                     probe.declare()
-                    z = surface_height(session.triangles(), np.array(PROBE_XY))
-                    probe_top = np.array([*PROBE_XY, z + PROBE_RADIUS + 0.004])
-                    probe_low = np.array([*PROBE_XY, z + PROBE_RADIUS - PRESS])
+                    z = surface_height(session.triangles(), probe_xy)
+                    probe_top = np.array([*probe_xy, z + PROBE_RADIUS + 0.004])
+                    probe_low = np.array([*probe_xy, z + PROBE_RADIUS - PRESS])
                 if t < T_PRESSED:
                     tip = lerp(probe_top, probe_low, (t - T_PROBE) / (T_PRESSED - T_PROBE))
                 elif t < T_SLID:
@@ -317,6 +320,12 @@ def main():
             sent_clouds += 1
         grasper_max = max(grasper_max, np.linalg.norm(grasper.force))
         probe_max = max(probe_max, np.linalg.norm(probe.force))
+        if T_PRESSED - 0.5 <= t < T_PRESSED and probe.tip is not None:  # pressed in, before the slide
+            with session.lock:
+                s, targets = session.status, session.targets
+            contacts = dict(zip(s.instrument_names, s.instrument_contacts)).get("probe", 0)
+            if contacts:
+                press.append((contacts, np.linalg.norm(probe.tip[:2] - targets[0][:2]), probe.tip[2] - targets[0][2]))
         if now >= next_line + 1.0:
             next_line += 1.0
             with session.lock:
@@ -352,7 +361,17 @@ def main():
     print(f"summary: tumour '{tumour_name}' moved {max(r[3] for r in rows) * 1e3:.2f} mm at most, "
           f"{np.linalg.norm(targets[0] - tumour_preop) * 1e3:.2f} mm at the end (registered to the intra-operative "
           f"liver; pre-operative equilibrium as reference)")
+    # The probe must press on the tumour's side of the liver, straight above it.
+    if not press:
+        rospy.signal_shutdown("done")
+        sys.exit("or_demo: FAILED: the probe never touched the liver while it pressed")
+    contacts, across, above = press[-1]
+    print(f"summary: the probe pressed with {contacts} contacts, its tip {across * 1e3:.1f} mm across from the tumour "
+          f"and {above * 1e3:.1f} mm above it")
     rospy.signal_shutdown("done")
+    if across > PRESS_ACROSS_MAX or above <= 0:
+        sys.exit(f"or_demo: FAILED: the probe pressed {across * 1e3:.1f} mm across from the tumour "
+                 f"(at most {PRESS_ACROSS_MAX * 1e3:.0f} mm) and {above * 1e3:.1f} mm above it (must be above)")
 
 
 if __name__ == "__main__":

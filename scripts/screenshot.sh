@@ -5,15 +5,14 @@
 #                                                     grasper holds the edge up, the probe presses);
 #                                                     the surface's opacity (default 0.5)
 # Needs: apt-get install rviz xvfb xauth imagemagick x11-utils libgl1-mesa-dri; a built workspace.
-port=$(/usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-source "$(dirname "$0")/ros_env.sh" "$port"
+source "$(dirname "$0")/ros_env.sh"
 # A free display: Xvfb writes the number it took to descriptor 3.
 displayfile=$(mktemp)
 Xvfb -displayfd 3 -screen 0 1280x800x24 3>"$displayfile" 2>/dev/null & XVFB=$!
 for _ in $(seq 50); do [ -s "$displayfile" ] && break; sleep 0.1; done
 export DISPLAY=":$(cat "$displayfile")"
 rm -f "$displayfile"
-roslaunch -p "$port" liver_sim or_demo.launch rviz:=true surface_alpha:="${2:-0.5}" >"$REPO/build/screenshot.log" 2>&1 & LAUNCH=$!
+roslaunch -p "$PORT" liver_sim or_demo.launch rviz:=true surface_alpha:="${2:-0.5}" >"$REPO/build/screenshot.log" 2>&1 & LAUNCH=$!
 trap 'kill $LAUNCH 2>/dev/null; sleep 2; kill $XVFB 2>/dev/null' EXIT
 # The session's clock starts when the demo prints its first line.
 for _ in $(seq 240); do grep -q "camera pixels" "$REPO/build/screenshot.log" && break; sleep 0.5; done

@@ -5,10 +5,10 @@
 # cores, as a build or another program on the OR computer would. Faults are injected into every
 # 40th frame (~test_fault_every). Further arguments go to roslaunch (e.g. background_refresh:=true).
 # Build first (scripts/run.sh or scripts/test.sh). Writes build/soak.json.
-source "$(dirname "$0")/ros_env.sh" 11497
-roscore -p 11497 >/dev/null 2>&1 & MASTER=$!
+source "$(dirname "$0")/ros_env.sh"
+roscore -p "$PORT" >/dev/null 2>&1 & MASTER=$!
 sleep 3
-taskset -c 0 roslaunch -p 11497 liver_sim liver_sim.launch test_fault_every:=40 "${@:3}" >"$REPO/build/soak_node.log" 2>&1 & NODE=$!
+taskset -c 0 roslaunch -p "$PORT" liver_sim liver_sim.launch test_fault_every:=40 "${@:3}" >"$REPO/build/soak_node.log" 2>&1 & NODE=$!
 LOAD=""
 if [ "${2:-0}" -gt 0 ]; then
   taskset -c 0,1 stress-ng --cpu "$2" --quiet & LOAD=$!

@@ -1,6 +1,7 @@
 #!/usr/bin/python3
 """Every tool's --help: exit status 0, the text on standard output, and each option that the
-text names explained on a line of its own (a line that starts with it, or lists it after a comma).
+text names explained on a line of its own (an indented line that starts with it, or with a short
+option before it as CLI11 lists "-h,--help", or lists it after a comma).
 
 usage: test/help_check.py TOOL...   (ctest runs it on the built tools)
 """
@@ -20,8 +21,9 @@ for tool in sys.argv[1:]:
     explained = set()
     for line in run.stdout.splitlines():
         body = line.strip()
-        if line[:1].isspace() and body.startswith("--"):
-            explained.add(re.match(r"--[\w-]+", body).group())
+        start = re.match(r"(-\w,\s*)?(--[\w-]+)", body)
+        if line[:1].isspace() and start:
+            explained.add(start.group(2))
             explained |= set(re.findall(r",\s*(--[\w-]+)", body))
     for option in sorted(set(re.findall(r"--[a-z][\w-]*", run.stdout)) - explained):
         failures.append(f"{name} --help names {option} without explaining it")

@@ -244,8 +244,7 @@ struct SofaMesh {
 class SofaLiverMesh : public ::testing::TestWithParam<SofaMesh> {};
 
 TEST_P(SofaLiverMesh, LoadsAsAClosedValidVolume) {
-  const std::string path = std::string(LIVER_SIM_SHARED_DATA) + "/sofa-liver/" + GetParam().file;
-  if (!fs::exists(path)) GTEST_SKIP() << path << " not found (shared data folder absent)";
+  const std::string path = std::string(LIVER_SIM_SOURCE_DIR) + "/config/sofa_liver/" + GetParam().file;
   const TetMesh m = read_mesh(path, 0.01);
   EXPECT_EQ(m.T.rows(), GetParam().tetrahedra);
   EXPECT_TRUE(check_mesh(m).ok());

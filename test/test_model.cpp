@@ -386,8 +386,7 @@ struct SofaMesh {
 class SofaLiver : public ::testing::TestWithParam<SofaMesh> {};
 
 TEST_P(SofaLiver, HangsUnderGravityWithCapsuleAndVessels) {
-  const std::string path = std::string(LIVER_SIM_SHARED_DATA) + "/sofa-liver/" + GetParam().file;
-  if (!std::ifstream(path)) GTEST_SKIP() << path << " not found (shared data folder absent)";
+  const std::string path = std::string(LIVER_SIM_SOURCE_DIR) + "/config/sofa_liver/" + GetParam().file;
   TetMesh mesh = read_mesh(path, GetParam().scale);
   const Eigen::Vector3d lo = mesh.V.colwise().minCoeff(), hi = mesh.V.colwise().maxCoeff();
   Scene s;

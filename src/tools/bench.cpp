@@ -22,51 +22,28 @@
 
 #include <algorithm>
 #include <atomic>
+#include <climits>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "liver_sim/runtime/frame_clock.h"
-#include "liver_sim/simulation/liver_model.h"
 #include "liver_sim/runtime/worker_pool.h"
+#include "liver_sim/simulation/liver_model.h"
+#include "tool_io.h"
 
 namespace {
 
 using liver_sim::LiverModel;
 using liver_sim::Scene;
 using liver_sim::StepResult;
-
-const char* kUsage =
-    "usage: bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]\n"
-    "             [--frequency HZ] [--strategy STRATEGY[:ITERATIONS[:TOLERANCE]]]... [--threads N,...]\n"
-    "             [--load N,...] [--realtime-priority P] [--paced] [--csv FILE] [--quiet]\n"
-    "Times dynamic frames of solver.dt from the scene's static equilibrium, the scene's loads scaled\n"
-    "by 1 + A sin(2 pi f t), for each solver strategy, against a converged reference run.\n"
-    "  --scene FILE          YAML scene (README, 'Scene format'); required\n"
-    "  --instruments FILE    YAML file with an instruments: list in the scene format, moving along\n"
-    "                        their trajectories from the first frame (e.g. config/bench/*.yaml)\n"
-    "  --set K=V             override a scalar of the scene, e.g. --set solver.dt=0.001 (repeatable)\n"
-    "  --frames N            timed frames per run, >= 1 (default 100)\n"
-    "  --amplitude A         relative amplitude of the breathing loads (default 0.5)\n"
-    "  --frequency HZ        their frequency (Hz, default 1)\n"
-    "  --strategy SPEC       a run (repeatable, at least one): STRATEGY is one of newton_krylov,\n"
-    "                        full_newton, full_newton_eigen, reused_factor_cg, cg, modified_newton;\n"
-    "                        ITERATIONS the Newton iterations per frame (default 30); TOLERANCE the\n"
-    "                        residual tolerance (default 1e-6; 0: always ITERATIONS)\n"
-    "  --threads N,...       solver.threads of the runs, each in [1, 64] (default 1)\n"
-    "  --load N,...          busy threads beside the runs, one run per count (default 0)\n"
-    "  --realtime-priority P SCHED_FIFO priority (1-99) of the timed runs' threads (default 0: normal)\n"
-    "  --paced               each frame starts on its slot of solver.dt of wall time, a late one at once,\n"
-    "                        as in the node (default: back to back); for solver.background_refresh\n"
-    "  --csv FILE            write the CSV rows (one per run) to FILE instead of standard output\n"
-    "  --quiet               no progress on standard error\n"
-    "  --help                this text\n";
 
 struct Spec {
   std::string text, strategy;
@@ -84,14 +61,29 @@ struct Run {
   long tets = 0, dofs = 0;
 };
 
+// A --strategy SPEC, STRATEGY[:ITERATIONS[:TOLERANCE]]; throws std::invalid_argument saying
+// what is wrong with it.
 Spec parse_spec(const std::string& s) {
   Spec spec;
   spec.text = s;
+  std::vector<std::string> parts;
   std::stringstream in(s);
-  std::string part;
-  std::getline(in, spec.strategy, ':');
-  if (std::getline(in, part, ':')) spec.iterations = std::stoi(part);
-  if (std::getline(in, part, ':')) spec.tolerance = std::stod(part);
+  for (std::string part; std::getline(in, part, ':');) parts.push_back(part);
+  if (parts.empty() || parts.size() > 3 || !liver_sim::parse_strategy(parts[0]))
+    throw std::invalid_argument("'" + s + "' is not STRATEGY[:ITERATIONS[:TOLERANCE]] with a strategy of the list");
+  spec.strategy = parts[0];
+  char* end = nullptr;
+  if (parts.size() > 1) {
+    const long n = std::strtol(parts[1].c_str(), &end, 10);
+    if (parts[1].empty() || *end || n < 1 || n > INT_MAX)  // solver.max_iterations bounds it further
+      throw std::invalid_argument("ITERATIONS '" + parts[1] + "' is not a whole number >= 1");
+    spec.iterations = static_cast<int>(n);
+  }
+  if (parts.size() > 2) {
+    spec.tolerance = std::strtod(parts[2].c_str(), &end);
+    if (parts[2].empty() || *end || !std::isfinite(spec.tolerance) || spec.tolerance < 0)
+      throw std::invalid_argument("TOLERANCE '" + parts[2] + "' is not a number >= 0");
+  }
   return spec;
 }
 
@@ -136,20 +128,6 @@ class CompetingLoad {
   std::atomic<bool> stop_{false};
   std::atomic<double> sink_{0};  // keeps the busy loop's work
 };
-
-std::vector<int> parse_counts(const std::string& s) {
-  std::vector<int> counts;
-  std::stringstream in(s);
-  std::string part;
-  while (std::getline(in, part, ',')) {
-    size_t used = 0;
-    const int n = std::stoi(part, &used);
-    if (used != part.size() || n < 0) throw std::invalid_argument("expected counts >= 0 separated by commas: " + s);
-    counts.push_back(n);
-  }
-  if (counts.empty()) throw std::invalid_argument("expected counts >= 0 separated by commas: " + s);
-  return counts;
-}
 
 // The converged solves (the start and the reference) have no time budget (--set solver.time_budget
 // is for the timed runs, as the node's one frame).
@@ -226,66 +204,112 @@ double percentile(std::vector<double> v, double p) {
   return v[std::min(v.size() - 1, static_cast<size_t>(p * v.size()))];
 }
 
-int main_checked(int argc, char** argv) {
-  std::string scene, csv;
+struct Options {
+  std::string scene, instruments, csv;
   std::vector<std::string> overrides;
   std::vector<Spec> specs;
-  Loading loading;
-  std::vector<int> thread_counts = {1}, loads = {0};
+  Loading loading;  // its instruments read from `instruments` once the command line is taken
+  std::vector<int> thread_counts{1}, loads{0};
   bool quiet = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const bool has_value = i + 1 < argc;
-    if (a == "--scene" && has_value) scene = argv[++i];
-    else if (a == "--set" && has_value) overrides.push_back(argv[++i]);
-    else if (a == "--instruments" && has_value) loading.instruments = liver_sim::load_instruments(argv[++i]);
-    else if (a == "--frames" && has_value) loading.frames = std::stoi(argv[++i]);
-    else if (a == "--amplitude" && has_value) loading.amplitude = std::stod(argv[++i]);
-    else if (a == "--frequency" && has_value) loading.frequency = std::stod(argv[++i]);
-    else if (a == "--strategy" && has_value) specs.push_back(parse_spec(argv[++i]));
-    else if (a == "--threads" && has_value) thread_counts = parse_counts(argv[++i]);
-    else if (a == "--load" && has_value) loads = parse_counts(argv[++i]);
-    else if (a == "--realtime-priority" && has_value) loading.realtime_priority = std::stoi(argv[++i]);
-    else if (a == "--paced") loading.paced = true;
-    else if (a == "--csv" && has_value) csv = argv[++i];
-    else if (a == "--quiet") quiet = true;
-    else {
-      std::cerr << kUsage;
-      return 2;
-    }
-  }
+};
+
+// The command line into `o`: the exit status when the tool is to stop, else nothing.
+std::optional<int> parse_args(int argc, char** argv, Options* o) {
+  namespace tool = liver_sim::tool;
+  CLI::App app(
+      "Times dynamic frames of solver.dt from the scene's static equilibrium, the scene's loads scaled\n"
+      "by 1 + A sin(2 pi f t), for each solver strategy, against a converged reference run.",
+      "bench");
+  tool::describe(app,
+                 "usage: bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]\n"
+                 "             [--frequency HZ] [--strategy STRATEGY[:ITERATIONS[:TOLERANCE]]]... [--threads N,...]\n"
+                 "             [--load N,...] [--realtime-priority P] [--paced] [--csv FILE] [--quiet]\n");
+  app.add_option("--scene", o->scene, "YAML scene (README, 'Scene format'); required")->option_text("FILE")->required();
+  app.add_option("--instruments", o->instruments,
+                 "YAML file with an instruments: list in the scene format, moving along\n"
+                 "their trajectories from the first frame (e.g. config/bench/*.yaml)")
+      ->option_text("FILE");
+  tool::add_overrides(app, o->overrides,
+                      "override a scalar of the scene, e.g. --set solver.dt=0.001 (repeatable)");
+  app.add_option("--frames", o->loading.frames, "timed frames per run, >= 1 (default 100)")
+      ->option_text("N")
+      ->check(tool::at_least(1));
+  app.add_option("--amplitude", o->loading.amplitude, "relative amplitude of the breathing loads (default 0.5)")
+      ->option_text("A")
+      ->check(tool::any_number());
+  app.add_option("--frequency", o->loading.frequency, "their frequency (Hz, default 1)")
+      ->option_text("HZ")
+      ->check(tool::any_number());
+  app.add_option("--strategy",
+                 "a run (repeatable, at least one): STRATEGY is one of newton_krylov,\n"
+                 "full_newton, full_newton_eigen, reused_factor_cg, cg, modified_newton;\n"
+                 "ITERATIONS the Newton iterations per frame (default 30); TOLERANCE the\n"
+                 "residual tolerance (default 1e-6; 0: always ITERATIONS)")
+      ->option_text("SPEC")
+      ->required()
+      ->take_all()
+      ->allow_extra_args(false)
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            try {
+              parse_spec(text);
+              return "";
+            } catch (const std::invalid_argument& e) {
+              return e.what();
+            }
+          },
+          "SPEC"))
+      ->each([o](const std::string& text) { o->specs.push_back(parse_spec(text)); });
+  tool::add_list(app, "--threads", "N,...", o->thread_counts,
+                 "solver.threads of the runs, each " + tool::thread_bounds() + " (default 1)")
+      ->check(tool::thread_count());
+  tool::add_list(app, "--load", "N,...", o->loads,
+                 "busy threads beside the runs, one run per count, each >= 0 (default 0)")
+      ->check(tool::at_least(0));
+  app.add_option("--realtime-priority", o->loading.realtime_priority,
+                 "SCHED_FIFO priority (1-99) of the timed runs' threads (default 0: normal)")
+      ->option_text("P")
+      ->check(tool::integer("in [0, 99]", [](long p) { return p >= 0 && p <= 99; }));
+  app.add_flag("--paced", o->loading.paced,
+               "each frame starts on its slot of solver.dt of wall time, a late one at once,\n"
+               "as in the node (default: back to back); for solver.background_refresh");
+  app.add_option("--csv", o->csv, "write the CSV rows (one per run) to FILE instead of standard output")
+      ->option_text("FILE");
+  app.add_flag("--quiet", o->quiet, "no progress on standard error");
+  return tool::parse(app, argc, argv);
+}
+
+int run_all(const Options& o) {
+  Loading loading = o.loading;
+  if (!o.instruments.empty()) loading.instruments = liver_sim::load_instruments(o.instruments);
   const int frames = loading.frames;
-  if (scene.empty() || specs.empty() || frames < 1) {
-    std::cerr << kUsage;
-    return 2;
-  }
   Spec reference_spec = parse_spec("newton_krylov:50:1e-10");
   reference_spec.text = "reference";
-  const Eigen::VectorXd start = equilibrium(scene, overrides);
-  std::vector<std::string> reference_overrides = overrides;
+  const Eigen::VectorXd start = equilibrium(o.scene, o.overrides);
+  std::vector<std::string> reference_overrides = o.overrides;
   reference_overrides.push_back(kNoBudget);
-  const Run reference = run(scene, reference_overrides, reference_spec, loading, thread_counts[0], 0, start, quiet);
+  const Run reference = run(o.scene, reference_overrides, reference_spec, loading, o.thread_counts[0], 0, start, o.quiet);
   double peak = 0;  // errors are relative to the largest motion from the equilibrium in the reference run
   for (const Eigen::VectorXd& u : reference.displacement) peak = std::max(peak, u.cwiseAbs().maxCoeff());
 
   std::ofstream file;
-  if (!csv.empty()) file.open(csv);
-  std::ostream& out = csv.empty() ? std::cout : file;
+  if (!o.csv.empty()) file.open(o.csv);
+  std::ostream& out = o.csv.empty() ? std::cout : file;
   out << "scene,tetrahedra,dofs,strategy,iterations,tolerance,threads,load,frames,median_ms,mean_ms,p95_ms,fps,"
          "max_error,final_error,newton_iterations,linear_iterations,factorizations,factorization_ms,diverged,contacts,"
          "background_factorizations\n"
       << std::setprecision(6);
-  for (const Spec& spec : specs)
-    for (int threads : thread_counts)
-      for (int load : loads) {
-        const Run r = run(scene, overrides, spec, loading, threads, load, start, quiet);
+  for (const Spec& spec : o.specs)
+    for (int threads : o.thread_counts)
+      for (int load : o.loads) {
+        const Run r = run(o.scene, o.overrides, spec, loading, threads, load, start, o.quiet);
         double max_error = 0;
         for (int k = 0; k < frames; ++k)
           max_error = std::max(max_error, (r.displacement[k] - reference.displacement[k]).cwiseAbs().maxCoeff());
         const double final_error = (r.displacement.back() - reference.displacement.back()).cwiseAbs().maxCoeff();
         double mean = 0;
         for (double t : r.frame_ms) mean += t / frames;
-        out << scene << ',' << r.tets << ',' << r.dofs << ',' << spec.strategy << ',' << spec.iterations << ','
+        out << o.scene << ',' << r.tets << ',' << r.dofs << ',' << spec.strategy << ',' << spec.iterations << ','
             << spec.tolerance << ',' << threads << ',' << load << ',' << frames << ',' << percentile(r.frame_ms, 0.5)
             << ',' << mean << ',' << percentile(r.frame_ms, 0.95) << ',' << 1000.0 / mean << ',' << max_error / peak
             << ',' << final_error / peak << ',' << r.newton_iterations << ',' << r.linear_iterations << ','
@@ -299,13 +323,10 @@ int main_checked(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  for (int i = 1; i < argc; ++i)
-    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") {
-      std::cout << kUsage;
-      return 0;
-    }
+  Options opt;
+  if (const std::optional<int> status = parse_args(argc, argv, &opt)) return *status;
   try {
-    return main_checked(argc, argv);
+    return run_all(opt);
   } catch (const std::exception& e) {
     std::cerr << "bench: " << e.what() << "\n";
     return 1;

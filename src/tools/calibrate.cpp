@@ -10,8 +10,10 @@
 //   stage,load_scale,probe,ux,uy,uz     stage: parenchyma (no capsule) | capsule; u in m
 // A load level s runs the scene's static increments up to s times its loads, from the rest shape.
 // Each modulus is found by a 1-D search in ln E (bracketed by expanding steps from the start,
-// then Brent's method to 1e-5 in ln E) minimising the mean squared displacement misfit; a solve
-// that does not converge counts as an infinite misfit. Start values default to the scene's moduli.
+// then Brent's method, Boost.Math's, to about 1e-5 in ln E: 2^-20 relative in ln(E / 1 Pa))
+// minimising the mean squared displacement misfit; a solve that does not converge, or a modulus
+// outside the model's bounds, counts as a misfit above any other (a failed solve). Start values
+// default to the scene's moduli.
 // Progress (one line per model evaluation) goes to standard error, one JSON object to standard
 // output. Exit status: 0 fitted, 1 bad input (one line naming the file or key), 2 bad command
 // line, 3 the fit failed (a stage with no converged evaluation, no minimum within a factor 1e6
@@ -19,6 +21,7 @@
 // --tolerance, relative, from its --expect-* value) or, with --synthesize, a solve failed.
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <fstream>
 #include <functional>
@@ -32,31 +35,17 @@
 #include <utility>
 #include <vector>
 
+#include <boost/math/tools/minima.hpp>
+
 #include "liver_sim/simulation/liver_model.h"
-#include "json_text.h"
+#include "tool_io.h"
 
 namespace {
-
-using liver_sim::json_string;
 
 using liver_sim::LiverModel;
 using liver_sim::Scene;
 using liver_sim::StepResult;
 using liver_sim::TetMesh;
-
-const char* kUsage =
-    "usage: calibrate --scene FILE --synthesize OUT.csv [--set K=V]... [--levels 0.5,1]\n"
-    "       calibrate --scene FILE --measured IN.csv [--set K=V]... [--start-parenchyma E0]\n"
-    "                 [--start-capsule E0] [--expect-parenchyma E] [--expect-capsule E] [--tolerance REL]\n"
-    "  --scene FILE          YAML scene (see README, 'Scene format'); a static scene with probes\n"
-    "  --set K=V             override a scalar of the scene, e.g. --set capsule.thickness=93e-6\n"
-    "  --synthesize OUT.csv  write the scene's probe displacements without and with capsule\n"
-    "  --levels L,...        load levels to synthesize, fractions of the scene's loads (default 1)\n"
-    "  --measured IN.csv     fit the parenchyma, then the capsule Young's modulus to these data\n"
-    "  --start-parenchyma E0, --start-capsule E0   search starts (Pa; default: the scene's)\n"
-    "  --expect-parenchyma E, --expect-capsule E   known moduli (Pa): exit 3 when a fit is off by\n"
-    "  --tolerance REL       more than REL relative (default 0.01)\n"
-    "  --help                this text\n";
 
 const char* kHeader = "stage,load_scale,probe,ux,uy,uz";
 
@@ -67,8 +56,9 @@ const char* const kStageNames[] = {"parenchyma", "capsule"};
 struct Options {
   std::string scene, synthesize, measured;
   std::vector<std::string> overrides;
-  std::vector<double> levels;
-  std::optional<double> start[2], expect[2];
+  std::vector<double> levels{1.0};
+  double start[2] = {0, 0}, expect[2] = {0, 0};  // Pa, when given
+  bool has_start[2] = {false, false}, has_expect[2] = {false, false};
   double tolerance = 0.01;
 };
 
@@ -79,61 +69,60 @@ bool parse_number(const std::string& text, double* out) {
   return end != begin && *end == '\0' && std::isfinite(*out);
 }
 
-// "" when the command line is usable, else what is wrong with it.
-std::string parse_args(int argc, char** argv, Options* o) {
-  auto positive = [](const std::string& option, const std::string& text, double* out) -> std::string {
-    if (parse_number(text, out) && *out > 0) return "";
-    return option + " needs a positive number, not '" + text + "'";
-  };
-  static const std::vector<std::string> known = {
-      "--scene", "--synthesize", "--measured", "--set", "--levels", "--start-parenchyma", "--start-capsule",
-      "--expect-parenchyma", "--expect-capsule", "--tolerance"};
-  std::string levels;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (std::find(known.begin(), known.end(), a) == known.end()) return "unknown option '" + a + "'";
-    if (i + 1 >= argc) return a + " needs a value";
-    const std::string v = argv[++i];
-    double x = 0;
-    std::string error;
-    if (a == "--scene") o->scene = v;
-    else if (a == "--synthesize") o->synthesize = v;
-    else if (a == "--measured") o->measured = v;
-    else if (a == "--set") o->overrides.push_back(v);
-    else if (a == "--levels") levels = v;
-    else if (!(error = positive(a, v, &x)).empty()) return error;
-    else if (a == "--start-parenchyma") o->start[kParenchyma] = x;
-    else if (a == "--start-capsule") o->start[kCapsule] = x;
-    else if (a == "--expect-parenchyma") o->expect[kParenchyma] = x;
-    else if (a == "--expect-capsule") o->expect[kCapsule] = x;
-    else o->tolerance = x;
-  }
-  if (o->scene.empty()) return "--scene is required";
-  if (o->synthesize.empty() == o->measured.empty()) return "give exactly one of --synthesize and --measured";
-  if (!o->synthesize.empty()) {
-    if (o->start[0] || o->start[1] || o->expect[0] || o->expect[1])
-      return "--start-* and --expect-* apply to --measured";
-    std::stringstream list(levels.empty() ? "1" : levels);
-    for (std::string item; std::getline(list, item, ',');) {
-      double s = 0;
-      const std::string error = positive("--levels", item, &s);
-      if (!error.empty()) return error;
-      // The fit reads one row per stage, level and probe.
-      if (std::find(o->levels.begin(), o->levels.end(), s) != o->levels.end()) return "--levels repeats " + item;
-      o->levels.push_back(s);
+// The command line into `o`: the exit status when the tool is to stop, else nothing.
+std::optional<int> parse_args(int argc, char** argv, Options* o) {
+  namespace tool = liver_sim::tool;
+  CLI::App app("", "calibrate");
+  tool::describe(app,
+                 "usage: calibrate --scene FILE --synthesize OUT.csv [--set K=V]... [--levels 0.5,1]\n"
+                 "       calibrate --scene FILE --measured IN.csv [--set K=V]... [--start-parenchyma E0]\n"
+                 "                 [--start-capsule E0] [--expect-parenchyma E] [--expect-capsule E] [--tolerance REL]\n",
+                 "Exit status: 0 fitted, 1 bad input, 2 bad command line, 3 the fit failed or a fitted modulus is\n"
+                 "off its expected one by more than the tolerance (--synthesize: a solve failed).");
+  app.add_option("--scene", o->scene, "YAML scene (see README, 'Scene format'); a static scene with probes")
+      ->option_text("FILE")
+      ->required();
+  tool::add_overrides(app, o->overrides, "override a scalar of the scene, e.g. --set capsule.thickness=93e-6");
+  app.add_option("--synthesize", o->synthesize, "write the scene's probe displacements without and with capsule")
+      ->option_text("OUT.csv");
+  CLI::Option* levels =
+      tool::add_list(app, "--levels", "L,...", o->levels,
+                     "load levels to synthesize, fractions of the scene's loads, > 0 (default 1)")
+          ->check(tool::positive());
+  app.add_option("--measured", o->measured, "fit the parenchyma, then the capsule Young's modulus to these data")
+      ->option_text("IN.csv");
+  CLI::Option* start[2] = {
+      app.add_option("--start-parenchyma", o->start[kParenchyma], "search start (Pa, > 0; default: the scene's)"),
+      app.add_option("--start-capsule", o->start[kCapsule], "search start (Pa, > 0; default: the scene's)")};
+  CLI::Option* expect[2] = {
+      app.add_option("--expect-parenchyma", o->expect[kParenchyma],
+                     "known modulus (Pa, > 0): exit 3 when the fit is off by more than --tolerance"),
+      app.add_option("--expect-capsule", o->expect[kCapsule],
+                     "known modulus (Pa, > 0): exit 3 when the fit is off by more than --tolerance")};
+  for (CLI::Option* option : start) option->option_text("E0")->check(tool::positive());
+  for (CLI::Option* option : expect) option->option_text("E")->check(tool::positive());
+  app.add_option("--tolerance", o->tolerance,
+                 "how far, relative, a fitted modulus may be from its expected one, > 0\n(default 0.01)")
+      ->option_text("REL")
+      ->check(tool::positive());
+  app.callback([&] {
+    if (o->synthesize.empty() == o->measured.empty())
+      throw CLI::ValidationError("give exactly one of --synthesize and --measured");
+    for (int stage : {kParenchyma, kCapsule}) {
+      o->has_start[stage] = start[stage]->count() > 0;
+      o->has_expect[stage] = expect[stage]->count() > 0;
     }
-    if (o->levels.empty()) return "--levels needs at least one level";
-  } else if (!levels.empty()) {
-    return "--levels applies to --synthesize (the measurements carry their load levels)";
-  }
-  return "";
-}
-
-std::string json_number(double x) {
-  if (!std::isfinite(x)) return "null";
-  std::ostringstream s;
-  s << std::setprecision(9) << x;
-  return s.str();
+    if (!o->synthesize.empty()) {
+      if (o->has_start[0] || o->has_start[1] || o->has_expect[0] || o->has_expect[1])
+        throw CLI::ValidationError("--start-* and --expect-* apply to --measured");
+      // The fit reads one row per stage, level and probe.
+      for (auto l = o->levels.begin(); l != o->levels.end(); ++l)
+        if (std::find(o->levels.begin(), l, *l) != l) throw CLI::ValidationError("--levels", "repeats a level");
+    } else if (levels->count()) {
+      throw CLI::ValidationError("--levels applies to --synthesize (the measurements carry their load levels)");
+    }
+  });
+  return tool::parse(app, argc, argv);
 }
 
 // The scene of one stage: without capsule (stage 1) or with it (stage 2), at the given moduli.
@@ -269,12 +258,18 @@ double mean_square_misfit(const StageData& data, const Displacements& u) {
   return sum / data.readings.size();
 }
 
-// Search in x = ln E: the first step, the growth of the bracketing steps, how far from the start
-// the bracket may reach, and the final tolerance (relative in E).
+// Search in x = ln E: the first step, the growth of the bracketing steps and how far from the
+// start the bracket may reach; Brent's method stops within 2^(1 - kBits) |x| + 2^(-1 - kBits) of
+// the minimum (about 1e-5 in ln E, relative in E, for moduli of kPa to MPa), after at most
+// kMaxIterations steps.
 constexpr double kFirstStep = 0.6931471805599453;  // ln 2
 constexpr double kGrowth = 1.618033988749895;      // golden ratio
 constexpr double kReach = 13.815510557964274;      // ln 1e6
-constexpr double kTolerance = 1e-5;
+constexpr int kBits = 21;
+constexpr std::uintmax_t kMaxIterations = 100;
+// Boost's parabolic steps need finite values: a failed solve's misfit (infinite) enters them as
+// this, above any misfit (m^2) and small enough that their products of it stay finite.
+constexpr double kFailedMisfit = 1e300;
 
 struct Minimum {
   double x = 0;
@@ -282,61 +277,19 @@ struct Minimum {
   std::string failure;  // "" when a minimum was bracketed and refined
 };
 
-// Brent's method (parabolic steps, golden section when they are not trusted) on the bracket
-// a < b < c or c < b < a with f(b) below f(a) and f(c), all three given. Infinite values (failed
-// solves) only ever take golden-section steps. A minimum whose final bracket still ends on a
-// failed solve lies on the edge of convergence, not at a fit, and is reported as a failure.
-Minimum brent(double a, double b, double c, double fa, double fb, double fc,
-              const std::function<double(double)>& f) {
-  const double golden = 0.3819660112501051;  // 2 - golden ratio
-  double lo = a, hi = c, flo = fa, fhi = fc;
-  if (lo > hi) std::swap(lo, hi), std::swap(flo, fhi);
-  double x = b, w = b, v = b, fx = fb, fw = fb, fv = fb;
-  double d = 0, e = 0;  // the last step and the one before
-  for (;;) {
-    const double mid = 0.5 * (lo + hi), tol2 = 2 * kTolerance;
-    if (std::abs(x - mid) <= tol2 - 0.5 * (hi - lo))
-      return {x, fx, std::isfinite(flo) && std::isfinite(fhi) ? "" : "the minimum borders on a failed solve"};
-    bool parabolic = false;
-    if (std::abs(e) > kTolerance && std::isfinite(fx) && std::isfinite(fw) && std::isfinite(fv)) {
-      double r = (x - w) * (fx - fv), q = (x - v) * (fx - fw), p = (x - v) * q - (x - w) * r;
-      q = 2 * (q - r);
-      if (q > 0) p = -p;
-      q = std::abs(q);
-      // Accepted when it falls inside the bracket and moves less than half the step before last.
-      if (std::abs(p) < std::abs(0.5 * q * e) && p > q * (lo - x) && p < q * (hi - x)) {
-        e = d;
-        d = p / q;
-        if (x + d - lo < tol2 || hi - (x + d) < tol2) d = std::copysign(kTolerance, mid - x);
-        parabolic = true;
-      }
-    }
-    if (!parabolic) {
-      e = x >= mid ? lo - x : hi - x;
-      d = golden * e;
-    }
-    const double u = std::abs(d) >= kTolerance ? x + d : x + std::copysign(kTolerance, d);
-    const double fu = f(u);
-    if (fu <= fx) {
-      if (u >= x) lo = x, flo = fx;
-      else hi = x, fhi = fx;
-      v = w, fv = fw, w = x, fw = fx, x = u, fx = fu;
-    } else {
-      if (u < x) lo = u, flo = fu;
-      else hi = u, fhi = fu;
-      if (fu <= fw || w == x) {
-        v = w, fv = fw, w = u, fw = fu;
-      } else if (fu <= fv || v == x || v == w) {
-        v = u, fv = fu;
-      }
-    }
-  }
-}
-
 // Minimises f over x within kReach of x0: walks downhill with growing steps until f rises on
-// both sides, then refines with Brent's method. A start whose solve fails is first replaced by
-// the nearest converged point on either side.
-Minimum minimize(double x0, const std::function<double(double)>& f) {
+// both sides, then refines the bracket with Brent's method (Boost.Math). A start whose solve
+// fails is first replaced by the nearest converged point on either side. Each x is solved once.
+// A minimum next to a failed solve (the nearest point tried on either side; Brent's final
+// bracket ends on them) lies on the edge of convergence, not at a fit, and is reported as a
+// failure.
+Minimum minimize(double x0, const std::function<double(double)>& misfit) {
+  std::map<double, double> tried;  // x -> f(x)
+  auto f = [&](double x) {
+    const auto [at, fresh] = tried.try_emplace(x, 0.0);
+    if (fresh) at->second = misfit(x);
+    return at->second;
+  };
   double a = x0, fa = f(a);
   for (double step = kFirstStep; !std::isfinite(fa) && step <= kReach; step *= kGrowth)
     for (double side : {step, -step})
@@ -344,13 +297,26 @@ Minimum minimize(double x0, const std::function<double(double)>& f) {
   if (!std::isfinite(fa)) return {x0, fa, "no converged solve within a factor 1e6 of the start"};
   double b = a + kFirstStep, fb = f(b);
   if (fb > fa) std::swap(a, b), std::swap(fa, fb);
+  double c;
   for (;;) {
-    const double c = std::clamp(b + kGrowth * (b - a), x0 - kReach, x0 + kReach);
+    c = std::clamp(b + kGrowth * (b - a), x0 - kReach, x0 + kReach);
     if (c == b) return {b, fb, "the misfit still falls a factor 1e6 from the start"};
-    const double fc = f(c);
-    if (fc > fb) return brent(a, b, c, fa, fb, fc, f);
-    a = b, fa = fb, b = c, fb = fc;
+    if (f(c) > fb) break;
+    a = b, b = c, fb = f(c);
   }
+  std::uintmax_t iterations = kMaxIterations;
+  const double x = boost::math::tools::brent_find_minima(
+                       [&](double x) {
+                         const double fx = f(x);
+                         return std::isfinite(fx) ? fx : kFailedMisfit;
+                       },
+                       std::min(a, c), std::max(a, c), kBits, iterations)
+                       .first;
+  if (iterations >= kMaxIterations) return {x, f(x), "Brent's method did not converge"};
+  const auto at = tried.find(x), right = std::next(at);
+  const bool bordered = (at != tried.begin() && !std::isfinite(std::prev(at)->second)) ||
+                        (right != tried.end() && !std::isfinite(right->second));
+  return {x, f(x), bordered ? "the minimum borders on a failed solve" : ""};
 }
 
 struct StageFit {
@@ -370,7 +336,12 @@ StageFit fit_stage(const TetMesh& mesh, const Scene& base, Stage stage, const St
     const Scene scene = stage == kParenchyma ? stage_scene(base, stage, modulus, base.capsule.young_modulus)
                                              : stage_scene(base, stage, parenchyma_modulus, modulus);
     Displacements u;
-    const std::string why = solve_levels(mesh, scene, data.levels, &u);
+    std::string why;
+    try {
+      why = solve_levels(mesh, scene, data.levels, &u);
+    } catch (const std::invalid_argument& e) {  // a modulus the model refuses (out of its bounds)
+      why = e.what();
+    }
     ++fit.evaluations;
     std::cerr << "calibrate: " << std::setw(10) << std::left << kStageNames[stage] << std::right << " E "
               << std::setprecision(9) << std::setw(15) << modulus << " Pa  ";
@@ -424,47 +395,46 @@ int calibrate(const Options& opt, const Scene& base, const TetMesh& mesh) {
   bool ok = true;
   for (Stage stage : {kParenchyma, kCapsule}) {
     const double parenchyma_modulus = fits[kParenchyma] ? fits[kParenchyma]->young_modulus : 0;
-    fits[stage] = fit_stage(mesh, base, stage, data[stage], opt.start[stage].value_or(defaults[stage]),
-                            parenchyma_modulus);
+    fits[stage] = fit_stage(mesh, base, stage, data[stage],
+                            opt.has_start[stage] ? opt.start[stage] : defaults[stage], parenchyma_modulus);
     if (!fits[stage]->failure.empty()) {
       ok = false;
       break;  // the capsule stage needs the parenchyma modulus
     }
   }
 
-  std::ostringstream js;
-  js << "{\n"
-     << "  \"scene\": " << json_string(opt.scene) << ",\n"
-     << "  \"measured\": " << json_string(opt.measured) << ",\n"
-     << "  \"capsule_thickness\": " << json_number(base.capsule.thickness) << ",\n";
+  nlohmann::ordered_json result;
+  result["scene"] = opt.scene;
+  result["measured"] = opt.measured;
+  result["capsule_thickness"] = base.capsule.thickness;
   int evaluations = 0;
   for (Stage stage : {kParenchyma, kCapsule}) {
-    js << "  " << json_string(kStageNames[stage]) << ": ";
-    if (!fits[stage]) {
-      js << "null,\n";
-      continue;
-    }
+    nlohmann::ordered_json& js = result[kStageNames[stage]];
+    if (!fits[stage]) continue;  // null
     const StageFit& f = *fits[stage];
     const StageData& d = data[stage];
     const double rms = std::sqrt(f.mean_square);
     evaluations += f.evaluations;
-    js << "{\"young_modulus\": " << json_number(f.failure.empty() ? f.young_modulus : std::numeric_limits<double>::quiet_NaN())
-       << ", \"start\": " << json_number(f.start) << ", \"rms_misfit\": " << json_number(rms)
-       << ", \"relative_misfit\": " << json_number(rms / std::sqrt(d.mean_square_measured))
-       << ", \"readings\": " << d.readings.size() << ", \"load_levels\": " << d.levels.size()
-       << ", \"evaluations\": " << f.evaluations << ", \"failed_evaluations\": " << f.failed;
-    if (!f.failure.empty()) js << ", \"failure\": " << json_string(f.failure);
-    if (opt.expect[stage] && f.failure.empty()) {
-      const double error = (f.young_modulus - *opt.expect[stage]) / *opt.expect[stage];
+    js["young_modulus"] = f.failure.empty() ? f.young_modulus : std::numeric_limits<double>::quiet_NaN();
+    js["start"] = f.start;
+    js["rms_misfit"] = rms;
+    js["relative_misfit"] = rms / std::sqrt(d.mean_square_measured);
+    js["readings"] = d.readings.size();
+    js["load_levels"] = d.levels.size();
+    js["evaluations"] = f.evaluations;
+    js["failed_evaluations"] = f.failed;
+    if (!f.failure.empty()) js["failure"] = f.failure;
+    if (opt.has_expect[stage] && f.failure.empty()) {
+      const double error = (f.young_modulus - opt.expect[stage]) / opt.expect[stage];
       ok = ok && std::abs(error) <= opt.tolerance;
-      js << ", \"expected\": " << json_number(*opt.expect[stage]) << ", \"relative_error\": " << json_number(error);
+      js["expected"] = opt.expect[stage];
+      js["relative_error"] = error;
     }
-    js << "},\n";
   }
-  js << "  \"evaluations\": " << evaluations << ",\n"
-     << "  \"tolerance\": " << json_number(opt.tolerance) << ",\n"
-     << "  \"ok\": " << (ok ? "true" : "false") << "\n}\n";
-  std::cout << js.str();
+  result["evaluations"] = evaluations;
+  result["tolerance"] = opt.tolerance;
+  result["ok"] = ok;
+  liver_sim::tool::print_json(std::cout, result);
   return ok ? 0 : 3;
 }
 
@@ -484,17 +454,8 @@ int run(const Options& opt) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  for (int i = 1; i < argc; ++i)
-    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") {
-      std::cout << kUsage;
-      return 0;
-    }
   Options opt;
-  const std::string error = parse_args(argc, argv, &opt);
-  if (!error.empty()) {
-    std::cerr << "calibrate: " << error << "\n" << kUsage;
-    return 2;
-  }
+  if (const std::optional<int> status = parse_args(argc, argv, &opt)) return *status;
   try {
     return run(opt);
   } catch (const std::exception& e) {

@@ -22,13 +22,13 @@
 // other random clouds; --targets-csv writes every target's error at the last frame of every run.
 // Progress on stderr. Pin it (taskset -c 0) for timings.
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <ctime>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -37,53 +37,13 @@
 #include "liver_sim/simulation/liver_model.h"
 #include "liver_sim/registration/registration.h"
 #include "liver_sim/registration/target_uncertainty.h"
+#include "liver_sim/session/tracking_session.h"
 #include "scenarios.h"
+#include "tool_io.h"
 
 namespace {
 
 using namespace liver_sim;
-
-const char* kUsage =
-    "usage: register_bench --scene FILE [--set K=V]... [--truth-scene FILE] [--scenario NAME,...]\n"
-    "                      [--sensor depth|surface] [--frames N] [--repeats R] [--noise M,...]\n"
-    "                      [--visible FRACTION,...] [--outliers FRACTION,...] [--stiffness SCALE,...]\n"
-    "                      [--attachments model|truth] [--supports estimate|off] [--camera-motion DEG]\n"
-    "                      [--csv FILE] [--targets-csv FILE] [--quiet]\n"
-    "Registers the model to synthetic clouds of a deforming truth, frame by frame; one CSV row per\n"
-    "combination of the lists (target registration errors before and after, time per frame).\n"
-    "  --scene FILE            the model's YAML scene (README, 'Scene format'); required\n"
-    "  --set K=V               override a scalar of the model's scene (repeatable)\n"
-    "  --truth-scene FILE      an independent truth (scripts/make_truth_phantom.py); default: the\n"
-    "                          model's own scene (the inverse crime)\n"
-    "  --scenario NAME,...     the truth's load: lift, press, breathing, pneumoperitoneum (default lift)\n"
-    "  --sensor depth|surface  a depth camera (occlusion, holes, instruments, blood) or uniform\n"
-    "                          surface samples (default depth)\n"
-    "  --frames N              frames over which the load ramps to full, >= 1 (default 10)\n"
-    "  --repeats R             runs of each case with other random clouds, >= 1 (default 1)\n"
-    "  --noise M,...           depth noise at 25 cm (m, standard deviation; default 0.001)\n"
-    "  --visible FRACTION,...  share of the surface area in the sensor's view, in (0, 1] (default 0.3)\n"
-    "  --outliers FRACTION,... surface sensor: share of uniform outlier points (default 0)\n"
-    "  --stiffness SCALE,...   the model's parenchyma Young's modulus times SCALE, > 0 (default 1)\n"
-    "  --attachments model|truth  the model keeps its own attachments or gets the truth's (default model)\n"
-    "  --supports estimate|off    hold the candidate supports the clouds call for, or never (default estimate)\n"
-    "  --camera-motion DEG     the camera sways by +-DEG about the vertical through the liver (default 0)\n"
-    "  --csv FILE              write the rows to FILE instead of standard output\n"
-    "  --targets-csv FILE      write every target's error at the last frame of every run\n"
-    "  --quiet                 no progress on standard error\n"
-    "  --help                  this text\n";
-
-template <typename T, typename Parse>
-std::vector<T> list(const std::string& s, Parse parse) {
-  std::vector<T> v;
-  std::stringstream in(s);
-  std::string part;
-  while (std::getline(in, part, ',')) v.push_back(parse(part));
-  if (v.empty()) throw std::invalid_argument("empty list");
-  return v;
-}
-std::vector<double> numbers(const std::string& s) {
-  return list<double>(s, [](const std::string& p) { return std::stod(p); });
-}
 
 struct Options {
   std::string scene, truth_scene, csv, targets_csv;
@@ -99,47 +59,72 @@ struct Options {
   bool quiet = false;
 };
 
-Options parse(int argc, char** argv) {
-  Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--scene") o.scene = value();
-    else if (a == "--set") o.overrides.push_back(value());
-    else if (a == "--truth-scene") o.truth_scene = value();
-    else if (a == "--scenario") o.scenarios = list<std::string>(value(), [](const std::string& p) { return p; });
-    else if (a == "--sensor") {
-      const std::string s = value();
-      if (s != "depth" && s != "surface") throw std::invalid_argument("--sensor must be depth or surface");
-      o.depth_sensor = s == "depth";
-    } else if (a == "--frames") o.frames = std::stoi(value());
-    else if (a == "--repeats") o.repeats = std::stoi(value());
-    else if (a == "--noise") o.noise = numbers(value());
-    else if (a == "--visible") o.visible = numbers(value());
-    else if (a == "--outliers") o.outliers = numbers(value());
-    else if (a == "--stiffness") o.stiffness = numbers(value());
-    else if (a == "--attachments") {
-      const std::string s = value();
-      if (s != "model" && s != "truth") throw std::invalid_argument("--attachments must be model or truth");
-      o.truth_attachments = s == "truth";
-    } else if (a == "--supports") {
-      const std::string s = value();
-      if (s != "estimate" && s != "off") throw std::invalid_argument("--supports must be estimate or off");
-      o.estimate_supports = s == "estimate";
-    } else if (a == "--camera-motion") o.camera_motion = std::stod(value());
-    else if (a == "--csv") o.csv = value();
-    else if (a == "--targets-csv") o.targets_csv = value();
-    else if (a == "--quiet") o.quiet = true;
-    else throw std::invalid_argument("unknown argument " + a);
-  }
-  if (o.scene.empty()) throw std::invalid_argument("--scene is required");
-  if (o.frames < 1 || o.repeats < 1) throw std::invalid_argument("--frames and --repeats must be >= 1");
-  for (double s : o.stiffness)
-    if (!(s > 0)) throw std::invalid_argument("--stiffness scales must be > 0");
-  return o;
+// The command line into `o`: the exit status when the tool is to stop, else nothing.
+std::optional<int> parse(int argc, char** argv, Options* o) {
+  namespace tool = liver_sim::tool;
+  CLI::App app(
+      "Registers the model to synthetic clouds of a deforming truth, frame by frame; one CSV row per\n"
+      "combination of the lists (target registration errors before and after, time per frame).",
+      "register_bench");
+  tool::describe(app,
+                 "usage: register_bench --scene FILE [--set K=V]... [--truth-scene FILE] [--scenario NAME,...]\n"
+                 "                      [--sensor depth|surface] [--frames N] [--repeats R] [--noise M,...]\n"
+                 "                      [--visible FRACTION,...] [--outliers FRACTION,...] [--stiffness SCALE,...]\n"
+                 "                      [--attachments model|truth] [--supports estimate|off] [--camera-motion DEG]\n"
+                 "                      [--csv FILE] [--targets-csv FILE] [--quiet]\n");
+  // An option of two words, `flag` set when it is `yes`.
+  auto choice = [&](const std::string& name, const std::string& a, const std::string& b, const std::string& yes,
+                    bool& flag, const std::string& what) {
+    app.add_option_function<std::string>(name, [&flag, yes](const std::string& v) { flag = v == yes; }, what)
+        ->option_text(a + "|" + b)
+        ->check(CLI::IsMember({a, b}));
+  };
+  std::string scenarios;
+  for (const std::string& s : surgical_scenario_names()) scenarios += (scenarios.empty() ? "" : ", ") + s;
+  app.add_option("--scene", o->scene, "the model's YAML scene (README, 'Scene format'); required")
+      ->option_text("FILE")
+      ->required();
+  tool::add_overrides(app, o->overrides, "override a scalar of the model's scene (repeatable)");
+  app.add_option("--truth-scene", o->truth_scene,
+                 "an independent truth (scripts/make_truth_phantom.py); default: the\n"
+                 "model's own scene (the inverse crime)")
+      ->option_text("FILE");
+  tool::add_list(app, "--scenario", "NAME,...", o->scenarios, "the truth's load: " + scenarios + " (default lift)")
+      ->check(CLI::IsMember(surgical_scenario_names()));
+  choice("--sensor", "depth", "surface", "depth", o->depth_sensor,
+         "a depth camera (occlusion, holes, instruments, blood) or uniform\n"
+         "surface samples (default depth)");
+  app.add_option("--frames", o->frames, "frames over which the load ramps to full, >= 1 (default 10)")
+      ->option_text("N")
+      ->check(tool::at_least(1));
+  app.add_option("--repeats", o->repeats, "runs of each case with other random clouds, >= 1 (default 1)")
+      ->option_text("R")
+      ->check(tool::at_least(1));
+  tool::add_list(app, "--noise", "M,...", o->noise,
+                 "depth noise at 25 cm (m, standard deviation, >= 0; default 0.001)")
+      ->check(tool::non_negative());
+  tool::add_list(app, "--visible", "FRACTION,...", o->visible,
+                 "share of the surface area in the sensor's view, in (0, 1] (default 0.3)")
+      ->check(tool::number("in (0, 1]", [](double f) { return f > 0 && f <= 1; }));
+  tool::add_list(app, "--outliers", "FRACTION,...", o->outliers,
+                 "surface sensor: share of uniform outlier points, in [0, 1] (default 0)")
+      ->check(tool::number("in [0, 1]", [](double f) { return f >= 0 && f <= 1; }));
+  tool::add_list(app, "--stiffness", "SCALE,...", o->stiffness,
+                 "the model's parenchyma Young's modulus times SCALE, > 0 (default 1)")
+      ->check(tool::positive());
+  choice("--attachments", "model", "truth", "truth", o->truth_attachments,
+         "the model keeps its own attachments or gets the truth's (default model)");
+  choice("--supports", "estimate", "off", "estimate", o->estimate_supports,
+         "hold the candidate supports the clouds call for, or never (default estimate)");
+  app.add_option("--camera-motion", o->camera_motion,
+                 "the camera sways by +-DEG about the vertical through the liver (default 0)")
+      ->option_text("DEG")
+      ->check(tool::any_number());
+  app.add_option("--csv", o->csv, "write the rows to FILE instead of standard output")->option_text("FILE");
+  app.add_option("--targets-csv", o->targets_csv, "write every target's error at the last frame of every run")
+      ->option_text("FILE");
+  app.add_flag("--quiet", o->quiet, "no progress on standard error");
+  return tool::parse(app, argc, argv);
 }
 
 std::vector<Eigen::Vector3d> target_positions(const LiverModel& m) {
@@ -220,18 +205,8 @@ double median(std::vector<double> v) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  for (int i = 1; i < argc; ++i)
-    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") {
-      std::cout << kUsage;
-      return 0;
-    }
   Options opt;
-  try {
-    opt = parse(argc, argv);
-  } catch (const std::exception& e) {
-    std::cerr << "register_bench: " << e.what() << "\n" << kUsage;
-    return 2;
-  }
+  if (const std::optional<int> status = parse(argc, argv, &opt)) return *status;
   try {
     const Scene scene = load_scene(opt.scene, opt.overrides);
     const TetMesh mesh = load_scene_mesh(scene);
@@ -267,9 +242,12 @@ int main(int argc, char** argv) {
         model_scene.parenchyma.young_modulus *= stiffness;
         if (opt.truth_attachments) model_scene.fixed = truth_scene.fixed;
         if (opt.truth_attachments || !opt.estimate_supports) model_scene.registration.candidate_supports.clear();
-        LiverModel model(mesh, model_scene);
         // The pre-operative model: its own scene at equilibrium (the inverse crime: the truth's
-        // frame 0 exactly).
+        // frame 0 exactly). The session starts from it; its analyses run in the frame that
+        // registered the cloud, after every cloud (the node's, at most once a period, on a thread).
+        SessionOptions session_options;
+        session_options.analysis = RegistrationAnalysis::Placement::InFrame;
+        session_options.analysis_period = 0;
         {
           Scene tight = model_scene;
           tight.solver.mode = SolverOptions::Mode::Static;
@@ -278,12 +256,13 @@ int main(int argc, char** argv) {
           LiverModel rest(mesh, tight);
           const StepResult r = rest.step();
           if (!r.converged()) throw std::runtime_error("the pre-operative model did not converge: " + r.message);
-          model.set_positions(rest.positions());
+          session_options.start = rest.positions();
         }
+        TrackingSession session(mesh, model_scene, session_options);
+        const LiverModel& model = session.model();
+        const SurfaceRegistration& registration = session.registration();
         const Eigen::VectorXd preoperative = model.positions();
         const std::vector<Eigen::Vector3d> preoperative_targets = target_positions(model);
-        TargetUncertainty uncertainty(model, model_scene.registration.uncertainty);
-        StateCompliance compliance(model);
         if (preoperative_targets.size() != truth.names.size())
           throw std::runtime_error("the model tracks " + std::to_string(preoperative_targets.size()) + " targets, the truth " +
                                    std::to_string(truth.names.size()));
@@ -306,10 +285,7 @@ int main(int argc, char** argv) {
               std::string worst_target;
               double worst = -1;
               for (int r = 0; r < opt.repeats; ++r) {
-                model.reset();
-                model.set_stiffness_scale(1.0);
-                model.set_positions(preoperative);
-                SurfaceRegistration registration(model, model_scene.registration);
+                session.submit(Reset{preoperative});
                 std::vector<TargetUncertainty::Covariance> covariance;
                 for (int k = 1; k <= opt.frames; ++k) {
                   const unsigned seed = 1000 * r + k;  // the same draws for every case: differences are the case's
@@ -345,21 +321,20 @@ int main(int argc, char** argv) {
                     eye = view.eye;
                   }
                   cloud_points = static_cast<int>(cloud.size());
+                  // The analyses after every cloud: which candidate supports to hold, the tissue's
+                  // stiffness, the hidden loads; the targets' covariances at the last.
+                  if (k == opt.frames) session.want_covariances();
+                  session.submit(Cloud{std::move(cloud), eye, 0});
                   // CPU time besides the wall clock: the cost on a core shared with other jobs.
                   const std::clock_t c0 = std::clock();
-                  frame = registration.register_cloud(cloud, eye);
+                  const FrameReport report = session.advance();
                   const std::clock_t c1 = std::clock();
-                  frame_cpu_ms.push_back(1e3 * (c1 - c0) / CLOCKS_PER_SEC);
-                  // The analyses: which candidate supports to hold (every frame), the targets'
-                  // covariances (at the last).
-                  const auto t0 = std::chrono::steady_clock::now();
-                  compliance.factorize();
-                  if (k == opt.frames) covariance = uncertainty.covariances(compliance, registration.cloud_springs());
-                  registration.estimate_supports(compliance, registration.cloud_springs());
-                  registration.estimate_tissue_stiffness(compliance, registration.cloud_springs());
-                  registration.estimate_hidden_loads(compliance, registration.cloud_springs());
-                  analysis_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() / runs;
-                  analysis_cpu_ms += 1e3 * (std::clock() - c1) / CLOCKS_PER_SEC / runs;
+                  if (!report.cloud) throw std::runtime_error("frame " + std::to_string(k) + ": the cloud was refused: " + session.notices().last_refusal());
+                  frame = *report.cloud;
+                  frame_cpu_ms.push_back(1e3 * (c1 - c0) / CLOCKS_PER_SEC - 1e3 * report.analysis.cpu_time);
+                  if (k == opt.frames) covariance = session.covariances();
+                  analysis_ms += 1e3 * report.analysis.wall_time / runs;
+                  analysis_cpu_ms += 1e3 * report.analysis.cpu_time / runs;
                   frame_ms.push_back(frame.total_ms);
                   newton += frame.newton_iterations;
                   filter_ms += frame.filter_ms / runs;
@@ -369,6 +344,8 @@ int main(int argc, char** argv) {
                   diverged += frame.step.status == StepResult::Status::Diverged;
                 }
                 const std::vector<Eigen::Vector3d> registered = target_positions(model);
+                if (covariance.size() != registered.size())
+                  throw std::runtime_error("no target covariances at the last frame: " + session.last_step().message);
                 energy += spring_energy(model) / opt.repeats;
                 tissue_factor += model.stiffness_scale() / opt.repeats;
                 hidden_load += registration.hidden_load_total() / opt.repeats;

@@ -9,72 +9,52 @@
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
 
-#include "liver_sim/simulation/liver_model.h"
-#include "json_text.h"
 #include "liver_sim/io/vtu_writer.h"
+#include "liver_sim/simulation/liver_model.h"
+#include "tool_io.h"
 
 namespace {
 
-using liver_sim::json_string;
-
 using liver_sim::LiverModel;
 using liver_sim::StepResult;
-
-const char* kUsage =
-    "usage: simulate --scene FILE [--set dotted.key=value]... [--threads N] [--vtu FILE] [--csv FILE] [--quiet]\n"
-    "  --scene FILE   YAML scene (see README, 'Scene format')\n"
-    "  --set K=V      override a scalar of the scene, e.g. --set capsule.enabled=false\n"
-    "  --threads N    threads of the element loops (solver.threads, default 1; results do not change)\n"
-    "  --vtu FILE     write the final mesh with its displacement field (VTK XML)\n"
-    "  --csv FILE     write the probe displacements after every step\n"
-    "  --quiet        no progress on standard error\n"
-    "  --help         this text\n"
-    "Exit status: 0 done, 1 bad input, 2 bad command line, 3 a step diverged.\n";
+using Json = nlohmann::ordered_json;
 
 struct Options {
   std::string scene, vtu, csv;
-  std::vector<std::string> overrides;
+  std::vector<std::string> overrides;  // --set, then --threads
   bool quiet = false;
 };
 
-bool parse_args(int argc, char** argv, Options* o) {
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&](std::string* out) {
-      if (i + 1 >= argc) return false;
-      *out = argv[++i];
-      return true;
-    };
-    std::string v;
-    if (a == "--scene" && value(&o->scene)) continue;
-    if (a == "--vtu" && value(&o->vtu)) continue;
-    if (a == "--csv" && value(&o->csv)) continue;
-    if (a == "--set" && value(&v)) {
-      o->overrides.push_back(v);
-      continue;
-    }
-    if (a == "--threads" && value(&v)) {
-      o->overrides.push_back("solver.threads=" + v);
-      continue;
-    }
-    if (a == "--quiet") {
-      o->quiet = true;
-      continue;
-    }
-    return false;
-  }
-  return !o->scene.empty();
+// The command line into `o`: the exit status when the tool is to stop, else nothing.
+std::optional<int> parse_args(int argc, char** argv, Options* o) {
+  namespace tool = liver_sim::tool;
+  CLI::App app("", "simulate");
+  tool::describe(app,
+                 "usage: simulate --scene FILE [--set dotted.key=value]... [--threads N] [--vtu FILE] [--csv FILE] "
+                 "[--quiet]\n",
+                 "Exit status: 0 done, 1 bad input, 2 bad command line, 3 a step diverged.");
+  app.add_option("--scene", o->scene, "YAML scene (see README, 'Scene format')")->option_text("FILE")->required();
+  tool::add_overrides(app, o->overrides, "override a scalar of the scene, e.g. --set capsule.enabled=false");
+  int threads = 0;
+  app.add_option("--threads", threads,
+                 "threads of the element loops (solver.threads, default 1, " + tool::thread_bounds() +
+                     "; results do not change)")
+      ->option_text("N")
+      ->check(tool::thread_count());
+  app.add_option("--vtu", o->vtu, "write the final mesh with its displacement field (VTK XML)")->option_text("FILE");
+  app.add_option("--csv", o->csv, "write the probe displacements after every step")->option_text("FILE");
+  app.add_flag("--quiet", o->quiet, "no progress on standard error");
+  if (const std::optional<int> status = tool::parse(app, argc, argv)) return status;
+  if (threads > 0) o->overrides.push_back("solver.threads=" + std::to_string(threads));
+  return std::nullopt;
 }
 
-std::string json_vec(const Eigen::Vector3d& v) {
-  std::ostringstream s;
-  s << std::setprecision(9) << '[' << v[0] << ", " << v[1] << ", " << v[2] << ']';
-  return s.str();
-}
+Json json_vec(const Eigen::Vector3d& v) { return Json::array({v[0], v[1], v[2]}); }
 
 const char* status_word(StepResult::Status s) {
   switch (s) {
@@ -151,62 +131,52 @@ int run(const Options& opt) {
   std::vector<double> sorted = step_ms;
   std::sort(sorted.begin(), sorted.end());
 
-  std::ostringstream js;
-  js << std::setprecision(9) << "{\n"
-     << "  \"scene\": " << json_string(opt.scene) << ",\n"
-     << "  \"nodes\": " << model.mesh().V.rows() << ",\n"
-     << "  \"tetrahedra\": " << model.mesh().T.rows() << ",\n"
-     << "  \"boundary_triangles\": " << model.boundary().rows() << ",\n"
-     << "  \"membrane_triangles\": " << model.capsule_triangles() << ",\n"
-     << "  \"dofs\": " << 3 * model.mesh().V.rows() << ",\n"
-     << "  \"mode\": \"" << (dynamic ? "dynamic" : "static") << "\",\n"
-     << "  \"converged\": " << (last.converged() ? "true" : "false") << ",\n"
-     << "  \"converged_steps\": " << converged_steps << ",\n"
-     << "  \"status\": \"" << status_word(last.status) << "\",\n"
-     << "  \"message\": " << json_string(last.message) << ",\n"
-     << "  \"residual\": " << last.residual << ",\n"
-     << "  \"steps\": " << steps_done << ",\n"
-     << "  \"time\": " << model.time() << ",\n"
-     << "  \"newton_iterations\": {\"total\": " << iterations << ", \"max_per_step\": " << max_iterations << "},\n"
-     << "  \"gmres_iterations\": " << linear_iterations << ",\n"
-     << "  \"factorizations\": " << factorizations << ",\n"
-     << "  \"step_time_ms\": {\"min\": " << sorted.front() << ", \"median\": " << sorted[sorted.size() / 2]
-     << ", \"max\": " << sorted.back() << "},\n"
-     << "  \"phase_time_ms_per_step\": {\"assembly\": " << sum.assembly_ms / steps_done
-     << ", \"factorization\": " << sum.factorization_ms / steps_done
-     << ", \"solve\": " << sum.solve_ms / steps_done << ", \"contact\": " << sum.contact_ms / steps_done << "},\n"
-     << "  \"contact\": {\"max_contacts\": " << max_contacts << ", \"gauss_seidel_sweeps\": " << contact_sweeps
-     << ", \"problems_solved\": " << model.contact().solves() << ", \"compliance_columns\": " << model.contact().compliance_columns()
-     << "},\n"
-     << "  \"max_displacement\": " << model.max_displacement() << ",\n"
-     << "  \"probes\": {";
+  Json result;
+  result["scene"] = opt.scene;
+  result["nodes"] = model.mesh().V.rows();
+  result["tetrahedra"] = model.mesh().T.rows();
+  result["boundary_triangles"] = model.boundary().rows();
+  result["membrane_triangles"] = model.capsule_triangles();
+  result["dofs"] = 3 * model.mesh().V.rows();
+  result["mode"] = dynamic ? "dynamic" : "static";
+  result["converged"] = last.converged();
+  result["converged_steps"] = converged_steps;
+  result["status"] = status_word(last.status);
+  result["message"] = last.message;
+  result["residual"] = last.residual;
+  result["steps"] = steps_done;
+  result["time"] = model.time();
+  result["newton_iterations"] = {{"total", iterations}, {"max_per_step", max_iterations}};
+  result["gmres_iterations"] = linear_iterations;
+  result["factorizations"] = factorizations;
+  result["step_time_ms"] = {{"min", sorted.front()}, {"median", sorted[sorted.size() / 2]}, {"max", sorted.back()}};
+  result["phase_time_ms_per_step"] = {{"assembly", sum.assembly_ms / steps_done},
+                                      {"factorization", sum.factorization_ms / steps_done},
+                                      {"solve", sum.solve_ms / steps_done},
+                                      {"contact", sum.contact_ms / steps_done}};
+  result["contact"] = {{"max_contacts", max_contacts},
+                       {"gauss_seidel_sweeps", contact_sweeps},
+                       {"problems_solved", model.contact().solves()},
+                       {"compliance_columns", model.contact().compliance_columns()}};
+  result["max_displacement"] = model.max_displacement();
+  Json& probes = result["probes"] = Json::object();
   for (int p = 0; p < model.num_probes(); ++p)
-    js << (p ? ", " : "") << "\n    " << json_string(model.probe_name(p)) << ": {\"displacement\": "
-       << json_vec(model.probe_displacement(p)) << "}";
-  js << (model.num_probes() ? "\n  " : "") << "},\n  \"instruments\": {";
+    probes[model.probe_name(p)] = {{"displacement", json_vec(model.probe_displacement(p))}};
+  Json& instruments = result["instruments"] = Json::object();
   for (int i = 0; i < model.num_instruments(); ++i) {
     const liver_sim::InstrumentReaction& r = model.instrument_reaction(i);
-    js << (i ? ", " : "") << "\n    " << json_string(model.instrument(i).name) << ": {\"force\": " << json_vec(r.force)
-       << ", \"torque\": " << json_vec(r.torque) << ", \"contacts\": " << r.contacts << "}";
+    instruments[model.instrument(i).name] = {
+        {"force", json_vec(r.force)}, {"torque", json_vec(r.torque)}, {"contacts", r.contacts}};
   }
-  js << (model.num_instruments() ? "\n  " : "") << "}\n}\n";
-  std::cout << js.str();
+  liver_sim::tool::print_json(std::cout, result);
   return last.status == StepResult::Status::Diverged ? 3 : 0;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  for (int i = 1; i < argc; ++i)
-    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") {
-      std::cout << kUsage;
-      return 0;
-    }
   Options opt;
-  if (!parse_args(argc, argv, &opt)) {
-    std::cerr << kUsage;
-    return 2;
-  }
+  if (const std::optional<int> status = parse_args(argc, argv, &opt)) return *status;
   try {
     return run(opt);
   } catch (const std::exception& e) {

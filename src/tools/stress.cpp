@@ -16,6 +16,7 @@
 #include <functional>
 #include <iomanip>
 #include <iostream>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -23,6 +24,7 @@
 #include <vector>
 
 #include "liver_sim/simulation/liver_model.h"
+#include "tool_io.h"
 
 namespace {
 
@@ -365,42 +367,34 @@ std::vector<Case> cases() {
 
 }  // namespace
 
-const char* kUsage =
-    "usage: stress [--quick] [--group NAME] [--set K=V]... [--scene FILE] [--csv FILE]\n"
-    "Runs the numerical stress matrix; a Markdown table on standard output; exit status 0 when every\n"
-    "case ended as expected, 1 otherwise, 2 on a bad command line.\n"
-    "  --quick       the reduced matrix of the tests\n"
-    "  --group NAME  the cases of one group: 'capsule stiffness', 'Poisson ratio', 'time step',\n"
-    "                'element quality', inversion, '100 kPa step', contact\n"
-    "  --set K=V     a scene override applied to every case after its own (repeatable)\n"
-    "  --scene FILE  replaces the default scene (the aspiration cube)\n"
-    "  --csv FILE    also write the rows as CSV\n"
-    "  --help        this text\n";
-
 int main(int argc, char** argv) {
+  namespace tool = liver_sim::tool;
   bool quick = false;
   std::string scene = LIVER_SIM_ASPIRATION_SCENE, csv, group;
   std::vector<std::string> extra;  // --set K=V, after each case's own overrides
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--help" || a == "-h") {
-      std::cout << kUsage;
-      return 0;
-    } else if (a == "--quick") {
-      quick = true;
-    } else if (a == "--scene" && i + 1 < argc) {
-      scene = argv[++i];
-    } else if (a == "--csv" && i + 1 < argc) {
-      csv = argv[++i];
-    } else if (a == "--group" && i + 1 < argc) {
-      group = argv[++i];
-    } else if (a == "--set" && i + 1 < argc) {
-      extra.push_back(argv[++i]);
-    } else {
-      std::cerr << kUsage;
-      return 2;
+  const std::vector<Case> all = cases();
+  std::vector<std::string> groups;
+  std::string group_list;
+  for (const Case& c : all)
+    if (std::find(groups.begin(), groups.end(), c.group) == groups.end()) {
+      groups.push_back(c.group);
+      const bool one_word = c.group.find(' ') == std::string::npos;
+      group_list += (group_list.empty() ? "" : ", ") + (one_word ? c.group : "'" + c.group + "'");
     }
-  }
+  CLI::App app(
+      "Runs the numerical stress matrix; a Markdown table on standard output; exit status 0 when every\n"
+      "case ended as expected, 1 otherwise, 2 on a bad command line.",
+      "stress");
+  tool::describe(app, "usage: stress [--quick] [--group NAME] [--set K=V]... [--scene FILE] [--csv FILE]\n");
+  app.add_flag("--quick", quick, "the reduced matrix of the tests");
+  app.add_option("--group", group,
+"the cases of one group, one of " + group_list)
+      ->option_text("NAME")
+      ->check(CLI::IsMember(groups));
+  tool::add_overrides(app, extra, "a scene override applied to every case after its own (repeatable)");
+  app.add_option("--scene", scene, "replaces the default scene (the aspiration cube)")->option_text("FILE");
+  app.add_option("--csv", csv, "also write the rows as CSV")->option_text("FILE");
+  if (const std::optional<int> status = tool::parse(app, argc, argv)) return *status;
   std::ofstream csv_out;
   if (!csv.empty()) {
     csv_out.open(csv);
@@ -409,7 +403,6 @@ int main(int argc, char** argv) {
   std::cout << "| group | case | expected | result | steps | Newton | factorisations | contacts | residual | max displacement (mm) | inverted start → end | min quality | time (ms) | detail |\n"
             << "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
   int unexpected = 0;
-  const std::vector<Case> all = cases();
   for (size_t k = 0; k < all.size(); ++k) {
     Case c = all[k];
     c.overrides.insert(c.overrides.end(), extra.begin(), extra.end());
