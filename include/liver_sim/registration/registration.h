@@ -25,6 +25,7 @@
 
 #include "liver_sim/geometry/closest_points.h"
 #include "liver_sim/registration/cloud_filter.h"
+#include "liver_sim/registration/one_shot.h"
 #include "liver_sim/registration/tracked_targets.h"
 #include "liver_sim/simulation/liver_model.h"
 #include "liver_sim/registration/state_compliance.h"
@@ -73,6 +74,24 @@ class SurfaceRegistration {
   // springs of its last update that stepped, as does refine()'s.
   RegistrationFrame register_cloud(const pcl::PointCloud<pcl::PointXYZ>& cloud,
                                    const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
+
+  // One-shot registration (one_shot.h) of an organ deformed beyond what the frame-to-frame
+  // tracking reaches (the first cloud, or on request), its attachments unknown: `one_shot`
+  // (built from the same mesh and scene as the model) finds the rigid motion and the surface
+  // loads from the rest shape, starting from the current alignment. The registration then
+  // starts again from there (clear(), then): the model takes the registered shape, held there by
+  // the loads that hold it (its internal forces less the scene's loads at that shape; its
+  // supports stay where the shape put them), the rigid motion becomes the alignment applied to
+  // every cloud, and the cloud is registered as by register_cloud, so that tracking goes on.
+  // Throws std::invalid_argument, with nothing changed, for a cloud the one-shot registration
+  // refuses (one_shot.h) or a one-shot registration of another mesh; a refusal of the cloud by
+  // register_cloud comes after the hand-over.
+  struct OneShotReport {
+    OneShotResult one_shot;
+    RegistrationFrame frame;
+  };
+  OneShotReport register_one_shot(OneShotRegistration& one_shot, const pcl::PointCloud<pcl::PointXYZ>& cloud,
+                                  const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
 
   // The last cloud's next correspondence updates (up to options.frame_updates of those its
   // register_cloud left, fewer once the scene's solver.time_budget is spent: the first always
@@ -247,7 +266,8 @@ class SurfaceRegistration {
   std::vector<double> gains_;
   std::vector<Eigen::Vector3d> hidden_loads_;  // per patch (N)
   std::vector<Eigen::Vector3d> stepped_loads_;  // per patch (N): those of the model's last step that did not diverge
-  void set_model_loads();                      // hidden_loads_ as nodal loads on the model
+  Eigen::VectorXd shape_loads_;  // per DOF (N): those holding a one-shot registration's shape (empty: none)
+  void set_model_loads();        // hidden_loads_ as nodal loads on the model, with shape_loads_
 };
 
 }  // namespace liver_sim

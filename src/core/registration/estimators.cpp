@@ -177,7 +177,7 @@ void SurfaceRegistration::note_step(const StepResult& step) {
 }
 
 void SurfaceRegistration::set_model_loads() {
-  Eigen::VectorXd loads = Eigen::VectorXd::Zero(model_.positions().size());
+  Eigen::VectorXd loads = shape_loads_.size() ? shape_loads_ : Eigen::VectorXd::Zero(model_.positions().size());
   for (size_t p = 0; p < patches_.centres.size(); ++p)
     for (size_t i = 0; i < patches_.nodes[p].size(); ++i)
       loads.segment<3>(3 * patches_.nodes[p][i]) += patches_.weights[p][i] * hidden_loads_[p];

@@ -82,6 +82,7 @@ std::string SurfaceRegistration::set_stiffness(double stiffness) {
 
 void SurfaceRegistration::clear() {
   model_.set_stiffness_scale(1.0);
+  shape_loads_.resize(0);
   model_.set_surface_loads(Eigen::VectorXd());
   hidden_loads_.assign(patches_.centres.size(), Eigen::Vector3d::Zero());
   stepped_loads_ = hidden_loads_;
@@ -175,6 +176,30 @@ RegistrationFrame SurfaceRegistration::register_cloud(const pcl::PointCloud<pcl:
   }
   finish(frame, t_frame);
   return frame;
+}
+
+SurfaceRegistration::OneShotReport SurfaceRegistration::register_one_shot(OneShotRegistration& one_shot,
+                                                                       const pcl::PointCloud<pcl::PointXYZ>& cloud,
+                                                                       const std::optional<Eigen::Vector3d>& viewpoint) {
+  if (one_shot.model().mesh().V != model_.mesh().V || one_shot.model().mesh().T != model_.mesh().T)
+    throw std::invalid_argument("the one-shot registration's model has another mesh");
+  OneShotReport report;
+  report.one_shot = one_shot.solve(cloud, viewpoint, alignment_);
+  clear();
+  const Eigen::VectorXd& x = report.one_shot.positions;
+  model_.set_positions(x);
+  Eigen::VectorXd internal, external;
+  MechanicalModel& m = model_.mechanics();
+  m.internal_forces(x, internal);
+  m.external_forces(x, external);
+  shape_loads_ = internal - model_.load_scale() * external;
+  set_model_loads();
+  stepped_loads_ = hidden_loads_;
+  alignment_ = report.one_shot.alignment;
+  aligned_ = true;
+  align_requested_ = false;
+  report.frame = register_cloud(cloud, viewpoint);
+  return report;
 }
 
 void SurfaceRegistration::finish(RegistrationFrame& frame, Clock::time_point start) {
