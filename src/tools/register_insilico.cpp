@@ -136,11 +136,9 @@ int main(int argc, char** argv) {
     if (views.empty()) views = truth->view_names;
     const Scene scene = load_scene(opt.scene);
     const TetMesh mesh = load_scene_mesh(scene);
-    OneShotSession session(scene, opt.one_shot);
-    const Eigen::VectorXd rest = session.model().mechanics().rest_positions();
+    const Eigen::VectorXd rest = LiverModel(mesh, scene).mechanics().rest_positions();
     std::vector<Eigen::Vector3d> start;
     for (int k : truth->targets) start.push_back(truth->initial.V.row(k).transpose());
-    session.set_targets(start);
     const std::vector<EmbeddedPoint> embedded = embed_points(mesh.T, rest, start);
     // What each registration sees: a view's surface sampled densely, or a stylus's strokes over
     // the deformed surface's anterior side at each coverage asked for.
@@ -189,6 +187,9 @@ int main(int argc, char** argv) {
                   << std::setprecision(6);
     }
     for (const Input& input : inputs) {
+      // A session of its own for each input: no row depends on those before it.
+      OneShotSession session(scene, opt.one_shot);
+      session.set_targets(start);
       const std::clock_t c0 = std::clock();
       const OneShotSession::Result registered = session.register_cloud(input.cloud);
       const double cpu_ms = 1e3 * (std::clock() - c0) / CLOCKS_PER_SEC;
