@@ -57,9 +57,9 @@ class InsilicoRegistration(unittest.TestCase):
     def test_calibration_over_depth_bands(self):
         # Mutations seen failing: the model-form term's damping part dropped (bias = 0 in
         # OneShotRegistration::uncertainty): xz's d2 median 3.46, yz's shallow band 83% inside
-        # (a narrow margin); the loads never applied (as above): 18% inside. Targets (issue 49): 90-98% inside the 95% ellipsoids, the d2 median
-        # within 25% of 2.37; asserted a little wider (85-98%, 1.5-3.3) as one noise draw per
-        # view holds ~11,000 correlated targets.
+        # (a narrow margin); the loads never applied (as above): 18% inside. Targets (issue 49):
+        # 90-98% inside the 95% ellipsoids, the d2 median within 25% of 2.37; asserted a little
+        # wider (85-98%, 1.5-3.3): one noise draw per view, its 3,803 targets' errors correlated.
         for view in ("xz", "yz"):
             r = self.rows[view]
             for band in ("all", "shallow", "middle", "deep"):
