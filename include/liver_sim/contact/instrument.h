@@ -1,4 +1,5 @@
-// Rigid instrument shapes as signed distance functions, and pose paths. ROS-free.
+// Rigid instruments as signed distance functions (each shape's own in instrument_shape.h), and
+// pose paths. ROS-free.
 #pragma once
 
 #include <Eigen/Core>
@@ -15,8 +16,8 @@ struct SurfaceDistance {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
 };
 
-// For probe, shaft and tube. A point on the axis of a sphere or shaft has no nearest direction:
-// it is pushed along the instrument's -z (out of its tip).
+// A point on the axis of a sphere or shaft has no nearest direction: it is pushed along the
+// instrument's -z (out of its tip).
 SurfaceDistance surface_distance(const InstrumentOptions& shape, const Eigen::Isometry3d& pose,
                                  const Eigen::Vector3d& x);
 
@@ -31,11 +32,6 @@ struct TrianglePoint {
 };
 TrianglePoint deepest_point(const InstrumentOptions& shape, const Eigen::Isometry3d& pose, const Eigen::Vector3d& a,
                             const Eigen::Vector3d& b, const Eigen::Vector3d& c);
-
-// Is the point inside the tube's lumen cross-section (radius < inner_radius) and in front of
-// the opening by at most the wall thickness, on a surface facing into the tube? (suction)
-bool in_tube_lumen(const InstrumentOptions& tube, const Eigen::Isometry3d& pose, const Eigen::Vector3d& x,
-                   const Eigen::Vector3d& outward_normal);
 
 // Pose at time t: the fixed pose without a trajectory; else linear in position and spherical
 // linear in orientation between keyframes, held before the first and after the last.

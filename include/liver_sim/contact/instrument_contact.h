@@ -1,8 +1,9 @@
-// Contact between the tissue and rigid instruments (instrument.h), ROS-free: the instruments
-// (poses, trajectories, staging of large moves, grasping, the tubes' suction), contact detection
-// against the surface triangles, the contact rows, the Delassus operator from the stepper's
-// factor (node_compliance.h), the frictional contact problem (contact_solver.h), the Newton
-// update with the contact forces and the reactions on each instrument.
+// Contact between the tissue and rigid instruments, ROS-free: the instruments (instrument_slot.h:
+// poses, trajectories, staging of large moves; what each shape does besides pushing is its own,
+// instrument_shape.h), contact detection against the surface triangles, the contacts and their
+// rows (surface_contact.h), the frictional contact problem on the Delassus operator from the
+// stepper's factor (contact_problem.h), the two Newton updates with the contact forces (direct;
+// Krylov, krylov_contact_update.h) and the reactions on each instrument.
 //
 // A contact acts at a material point of the surface, carried by its triangle's nodes with its
 // barycentric weights: the surface is sampled, in the triangles near an instrument, at most half
@@ -18,37 +19,20 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
-#include <Eigen/QR>
-#include <array>
 #include <string>
 #include <vector>
 
+#include "liver_sim/contact/contact_problem.h"
+#include "liver_sim/contact/instrument.h"
+#include "liver_sim/contact/instrument_slot.h"
+#include "liver_sim/contact/krylov_contact_update.h"
+#include "liver_sim/contact/surface_contact.h"
+#include "liver_sim/contact/surface_point.h"
 #include "liver_sim/linalg/cholmod_solver.h"
 #include "liver_sim/linalg/gmres.h"
-#include "liver_sim/contact/instrument.h"
 #include "liver_sim/model/mechanical_model.h"
-#include "liver_sim/contact/node_compliance.h"
 
 namespace liver_sim {
-
-struct InstrumentReaction {
-  Eigen::Vector3d force = Eigen::Vector3d::Zero();   // N, exerted by the tissue on the instrument
-  Eigen::Vector3d torque = Eigen::Vector3d::Zero();  // N m, about the instrument's tip
-  int contacts = 0;                                  // surface points pressing on it or held by it
-};
-
-// A material point of the surface: on a boundary triangle (three nodes), an edge (two) or at a
-// node, with barycentric weights; nodes in increasing order and `sample` numbering the points of
-// one triangle or edge, so that a point found from two triangles has one description.
-struct SurfacePoint {
-  std::array<int, 3> nodes{-1, -1, -1};
-  Eigen::Vector3d weights = Eigen::Vector3d::Zero();
-  int count = 0;
-  int sample = 0;
-  Eigen::Vector3d at(const Eigen::VectorXd& x) const;
-  // The point of triangle `nodes` with weights w (weights below 1e-9 dropped).
-  static SurfacePoint on_triangle(const Eigen::Vector3i& nodes, const Eigen::Vector3d& w);
-};
 
 class InstrumentContact {
  public:
@@ -81,17 +65,10 @@ class InstrumentContact {
   // Work counters since construction: contact problems solved and compliance columns
   // (L^-1 P e_i) computed. Both stay 0 while no instrument comes within the alarm distance.
   long solves() const { return solves_; }
-  long compliance_columns() const { return compliance_.columns(); }
+  long compliance_columns() const { return problem_.compliance_columns(); }
 
   // A contact of the last detection: where, and with what force.
-  struct Contact {
-    int instrument;
-    SurfacePoint point;
-    int held;               // bilateral: its index in the grasper's held points; -1: unilateral
-    Eigen::Matrix3d frame;  // columns: normal, tangent, tangent (bilateral: identity), at the last detection
-    Eigen::Vector3d rows;   // gap and slips there (m)
-    Eigen::Vector3d lambda; // N on the tissue at the point, in the frame (normal first)
-  };
+  using Contact = SurfaceContact;
   const std::vector<Contact>& contacts() const { return contacts_; }
 
   // A step, as the stepper drives it:
@@ -144,7 +121,13 @@ class InstrumentContact {
   // Everything a step changes here: each instrument (pose, staging, grasp, reaction), the
   // contacts (the active set, forces, frames, rows), the tubes' suction loads. The stepper saves
   // it before a step and restores it when the step is rolled back.
-  struct State;
+  struct State {
+    std::vector<InstrumentSlot> instruments;
+    std::vector<Contact> contacts;
+    std::vector<PressureLoad> suction;  // of the tubes, in instrument order
+    Eigen::VectorXd x_stage;
+    std::vector<Eigen::Isometry3d> stage_from, stage_to;
+  };
   void save(State& s) const;
   void restore(const State& s);
 
@@ -152,88 +135,28 @@ class InstrumentContact {
   void reset();
 
  private:
-  struct Instrument {
-    InstrumentOptions options;
-    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();        // at the end of the step
-    Eigen::Isometry3d pose_start = Eigen::Isometry3d::Identity();  // at its start
-    bool closed = false;
-    bool was_enabled = false;                  // at the last step
-    std::vector<SurfacePoint> held;            // grasper: held points
-    std::vector<Eigen::Vector3d> held_local;   // and where, in the grasper's frame
-    int suction_load = -1;                     // tube: its pressure load in the mechanical model
-    InstrumentReaction reaction;
-  };
-
- public:
-  struct State {
-    std::vector<Instrument> instruments;
-    std::vector<Contact> contacts;
-    std::vector<PressureLoad> suction;  // of the tubes, in instrument order
-    Eigen::VectorXd x_stage;
-    std::vector<Eigen::Isometry3d> stage_from, stage_to;
-  };
-
- private:
-  // Normal gap and tangential slips (bilateral: position error) of contact c at x (m), and
-  // its frame (columns: normal, tangents).
-  Eigen::Vector3d contact_rows(const Contact& c, const Eigen::VectorXd& x, Eigen::Matrix3d* frame) const;
   // A new instrument of options o in slot `in`, posed at `time`; a tube gets a pressure load.
-  void place(Instrument& in, const InstrumentOptions& o, double time);
-  // Instrument k's size: the length a stage may travel is a quarter of it.
-  static double size(const InstrumentOptions& o);
-  // The triangles that may come within `reach` of an instrument of shape o at pose at x, by a
-  // bound on their distance (the distance function grows no faster than the distance).
-  template <typename Visit>
-  void near_triangles(const InstrumentOptions& o, const Eigen::Isometry3d& pose, const Eigen::VectorXd& x, double reach,
-                      const Visit& visit) const;
-  // The samples of boundary triangle t at most `spacing` apart in the rest shape (infinite: its
-  // nodes), each a SurfacePoint given to visit().
-  template <typename Visit>
-  void sample_triangle(int t, double spacing, const Visit& visit) const;
-  // The gap tolerance of the contact problem for a force tolerance (N): see direct_update.
-  double gap_tolerance(double force_tolerance) const;
-  // The Delassus operator of the contacts in W_, the predicted rows after the update A^-1 r in
-  // delta_ and the current forces in lambda_ (contact frames); z_ = L^-1 P r.
-  void contact_problem(CholmodSolver& factor, const Eigen::VectorXd& r);
-  // contact_problem, then projected Gauss-Seidel to the force tolerance: the new forces in
-  // lambda_ (contact frames). Returns the sweeps.
+  void place(InstrumentSlot& in, const InstrumentOptions& o, double time);
+  // Where an instrument that appears at its pose starts its move: back along its axis from
+  // where it touches the surface at x nowhere.
+  Eigen::Isometry3d entry_pose(const InstrumentSlot& in, const Eigen::VectorXd& x) const;
+  // The contact problem for the residual r (contact_problem.h), solved: the new forces in
+  // problem_.lambda(), the current ones kept for scale_update. Returns the sweeps.
   int solve_contact_problem(CholmodSolver& factor, const Eigen::VectorXd& r, double force_tolerance);
-  // The contacts' forces are an update's: kept for scale_update, gathered.
+  // The contact forces are an update's: kept for scale_update.
   void keep_update();
-  // z_ += the forward half of the contact force changes `change` (3 per contact, world frame).
-  void add_forward(const std::vector<Eigen::Vector3d>& change);
 
   MechanicalModel& mechanics_;
   ContactOptions options_;
-  std::vector<Instrument> instruments_;
+  std::vector<InstrumentSlot> instruments_;
   std::vector<Eigen::Isometry3d> stage_from_, stage_to_;
   Eigen::VectorXd x_stage_;  // positions at the start of the stage: slips are measured from them
   std::vector<Contact> contacts_, contacts_next_;
   std::vector<Eigen::Vector3d> lambda_before_update_, lambda_of_update_;  // per contact
-  NodeCompliance compliance_;
+  ContactProblem problem_;
+  KrylovContactUpdate krylov_;
+  std::vector<Eigen::Vector3d> change_;  // the direct update's force changes
   long solves_ = 0;
-  // Work of the contact updates, kept between them.
-  std::vector<int> free_nodes_;                 // the contacts' nodes not held by the scene
-  std::vector<Eigen::Vector3d> node_vector_;    // per node: E^T A^-1 r, or a force change
-  std::vector<char> node_marked_;
-  Eigen::VectorXd z_;
-  Eigen::MatrixXd W_;
-  Eigen::VectorXd delta_, lambda_;
-  std::vector<char> bilateral_;
-  std::vector<Eigen::Vector3d> change_;
-  struct ContactUnknown {  // one force unknown of the Krylov update
-    int contact;
-    Eigen::Vector3d row;     // its constraint row at the point (dx . row = target)
-    Eigen::Vector3d force;   // the force per unit unknown at the point
-    double target;
-  };
-  std::vector<ContactUnknown> unknowns_;
-  Eigen::MatrixXd schur_;
-  // Points close together on few nodes (a shaft lying along a face) make dependent rows: the
-  // least-norm solution of the Schur system.
-  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> schur_solver_;
-  Eigen::VectorXd augmented_rhs_, augmented_solution_, augmented_dx_, augmented_out_, schur_rhs_, schur_solution_;
-  Gmres gmres_;
 };
 
 }  // namespace liver_sim

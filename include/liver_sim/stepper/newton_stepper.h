@@ -1,9 +1,10 @@
 // The time stepper, ROS-free: static equilibrium and backward-Euler time steps by Newton's
-// method on the mechanical model (mechanical_model.h), with the update strategies (Newton-Krylov,
-// full and modified Newton, conjugate gradients), the predictors of dynamic steps, the line
-// search, the decisions to reuse or refresh the CHOLMOD factor, the detectors that roll a
-// diverging step back, and the step's wall-time budget. It owns the state (positions,
-// velocities, time) and the snapshot that a rollback restores.
+// method on the mechanical model (mechanical_model.h): the predictors of dynamic steps, the
+// Newton loop with its line search, the detectors that roll a diverging step back, and the
+// step's wall-time budget. How an iteration computes its update and when the factor
+// (tangent_factor.h) is refreshed is the update strategy's (src/core/stepper/update_strategy.h:
+// Newton-Krylov, full and modified Newton, conjugate gradients, one type each). It owns the
+// state (positions, velocities, time) and the snapshot that a rollback restores.
 //
 // Rollback: before each step the stepper saves everything the step may change, here, in the
 // mechanical model (rotations, their warm starts, the last evaluation, the damping snapshot) and
@@ -27,58 +28,28 @@
 #pragma once
 
 #include <Eigen/Core>
-#include <Eigen/SparseCholesky>
 #include <chrono>
 #include <limits>
+#include <map>
 #include <memory>
 #include <string>
 
-#include "liver_sim/linalg/background_factorization.h"
-#include "liver_sim/linalg/cholmod_solver.h"
-#include "liver_sim/linalg/conjugate_gradient.h"
-#include "liver_sim/linalg/gmres.h"
 #include "liver_sim/contact/instrument_contact.h"
+#include "liver_sim/linalg/cholmod_solver.h"
 #include "liver_sim/model/mechanical_model.h"
+#include "liver_sim/stepper/newton_matrix.h"
+#include "liver_sim/stepper/step_result.h"
+#include "liver_sim/stepper/tangent_factor.h"
 
 namespace liver_sim {
 
-// Wall time of one step by phase (ms).
-struct StepTiming {
-  double assembly_ms = 0;       // rotation update, internal/external forces, tangent assembly
-  double factorization_ms = 0;  // CHOLMOD numeric factorisations
-  double solve_ms = 0;          // GMRES: triangular solves and Jacobian products
-  double contact_ms = 0;        // detection, compliance columns, Delassus operator, Gauss-Seidel
-  double total_ms = 0;
-};
-
-struct StepResult {
-  enum class Status {
-    Converged,     // residual below tolerance
-    NotConverged,  // iteration cap reached closer to equilibrium; the state is kept (the next step
-                   // continues from it)
-    Diverged       // rolled back: non-finite values, a tangent that is not positive definite, a
-                   // residual blow-up, a stall (the cap reached no closer to equilibrium than the
-                   // step started), or (dynamic) mechanical energy growing beyond the work done
-  };
-  Status status = Status::Converged;
-  int iterations = 0;         // Newton iterations (factorisations) in this step
-  int linear_iterations = 0;  // GMRES iterations (preconditioned solves) in this step
-  int factorizations = 0;     // numeric factorisations in this step (often 0: the factor is reused)
-  int background_factorizations = 0;  // factors finished on the background thread and taken up
-                                      // in this step (SolverOptions::background_refresh)
-  int contacts = 0;           // instrument contacts carrying force at the end of the step
-  int contact_sweeps = 0;     // Gauss-Seidel sweeps of the contact solves in this step
-  double residual = 0;      // force residual relative to the load norm, at the end
-  bool out_of_time = false;  // the step stopped at SolverOptions::time_budget
-  StepTiming timing;
-  std::string message;      // why, when not converged
-  bool converged() const { return status == Status::Converged; }
-};
+class UpdateStrategy;
 
 class NewtonStepper {
  public:
   // Analyses the matrix pattern (CHOLMOD). Throws std::invalid_argument for invalid options.
   NewtonStepper(MechanicalModel& mechanics, InstrumentContact& contact, const SolverOptions& solver);
+  ~NewtonStepper();
 
   // Static mode: Newton to equilibrium under the loads times load_scale(). Dynamic mode: one
   // backward-Euler time step of solver.dt. Both advance time() by solver.dt (in static mode a
@@ -106,7 +77,7 @@ class NewtonStepper {
   // the energy known for the state is void and, with refactorize, the factor too.
   void model_changed(bool refactorize);
   // The next Newton iteration factorises the matrix afresh.
-  void refactorize() { drop_factor(); }
+  void refactorize() { factor_.drop(); }
   // Back to the rest shape, zero velocity, time 0.
   void reset();
 
@@ -138,7 +109,7 @@ class NewtonStepper {
 
   // Force the supports exert on the tissue at the fixed DOFs (N; 0 elsewhere).
   Eigen::VectorXd support_forces();
-  CholmodSolver& linear_solver() { return cholmod_; }
+  CholmodSolver& linear_solver() { return factor_.solver(); }
 
  private:
   // Residual r = loads - internal - inertia - damping + contact at x (dynamic terms use x_start_,
@@ -147,42 +118,54 @@ class NewtonStepper {
   double residual(const Eigen::VectorXd& x, Eigen::VectorXd& r, double* reference, bool zero_fixed = true);
   // Line-search merit: the free residual norm and the contact violation, in newtons.
   double merit(double residual_norm, const Eigen::VectorXd& x) const;
-  // Whether a factorisation as long as the last one would end before the step's deadline.
-  bool factorization_fits() const;
-  // The strategy of the next iteration, and whether that iteration starts with a factorisation.
-  SolverOptions::Strategy iteration_strategy() const;
-  bool factorizes(SolverOptions::Strategy strategy) const;
+  // The strategy of SolverOptions::strategy, and the one its iterations with contacts take,
+  // made once each (a change of strategy between frames allocates nothing). Throws bad_alloc.
+  void choose_strategy(SolverOptions::Strategy strategy);
+  // The strategy of the next iteration.
+  UpdateStrategy& iteration_strategy() const;
+  // step() without the exception barrier, and its parts.
+  StepResult advance();
+  // Out of time before a stage after the first: the step ends at the last stage.
+  bool stage_out_of_time(StepResult& result) const;
+  // Dynamic: x_ to the predicted state (solver.predictor); whether the rotations follow it, and
+  // whether the contacts were detected there.
+  bool predict(bool& contacts_detected);
+  // Dynamic: the energy check of a step that iterated (a runaway diverges).
+  void check_energy(StepResult& result);
   // Newton iterations from the current state; adds to result (iterations, timings, status).
   // contacts_detected: the contacts are already those of the current state. Past the time
   // budget it stops.
   void newton(StepResult& result, bool contacts_detected);
+  struct Solve;  // what the iterations of one newton() call share
+  struct LineSearch {
+    double norm, merit, reference;  // at the point taken
+    bool accepted;                  // a trial passed the merit or the potential test
+  };
+  // Whether the solve ends before another iteration: non-finite, blown up, converged, capped.
+  bool solve_ends(Solve& s);
+  bool iteration_out_of_time(Solve& s, bool fresh_factor);
+  // The matrix and factor the strategy asks for, and its update into dx_; false when it failed.
+  bool newton_update(UpdateStrategy& update, Solve& s, bool fresh_factor);
+  bool factorize(StepResult& result);
+  // Backtracking from x_ along dx_ into x_try_, r_try_.
+  LineSearch line_search(const Solve& s, bool contact_update);
+  // An iteration without descent on an old factor: undone, to be redone on a fresh factor when
+  // its factorisation fits in the time left (true); else the step ends here.
+  bool undo_for_fresh_factor(Solve& s, bool contact_update);
   // Dynamic steps: the mechanical energy (kinetic + elastic) and the work of the loads and of
   // the constraints over the step that ended at x_ (J).
   double mechanical_energy(const Eigen::VectorXd& x, const Eigen::VectorXd& v);
   double work_over_step();
-  // The Newton matrix into system_ with the element rotations of the last residual() call: the
-  // solver always assembles where it last evaluated.
-  void assemble_system();
-  // step() without the exception barrier.
-  StepResult advance();
-  // The factor no longer fits the model: the next iteration factorises in the step, and a
-  // background factorisation in progress is not taken up.
-  void drop_factor();
-  // SolverOptions::background_refresh: the thread and its solver's analysis, once, when the
-  // option is first on (at construction or in set_options, not in a step).
-  void make_background();
-  // At the start of an iteration: a finished background factor replaces the one in use; a
-  // wanted one starts from the state last evaluated, if the thread is free.
-  void refresh_in_background(StepResult& result);
   // True once when the injected fault is f (it is then consumed).
   bool take_fault(InjectedFault f);
+  // Those met after an accepted update.
+  void take_faults_after_update();
 
   struct Snapshot {
     Eigen::VectorXd x, v, v_previous, x_start;
     double time = 0, state_energy = 0;
-    bool rotations_continued = false, factor_valid = false, refresh_wanted = false;
-    long factorizations = 0;  // factorizations_ when taken
-    long background_starts = 0;  // background_starts_ when taken
+    bool rotations_continued = false;
+    TangentFactor::State factor;
     MechanicalModel::EvaluationState mechanics;
     InstrumentContact::State contact;
   };
@@ -190,26 +173,18 @@ class NewtonStepper {
   void restore(const Snapshot& s);
   Snapshot snapshot_;
   bool snapshot_valid_ = false;
-  long factorizations_ = 0;  // CHOLMOD factorisations since construction
   InjectedFault fault_ = InjectedFault::None;
   long held_up_on_purpose_ = 0;
   std::chrono::steady_clock::time_point deadline_;  // of the step in progress (time_budget)
-  std::chrono::steady_clock::duration factorization_time_{};  // of the last CHOLMOD factorisation
 
   MechanicalModel& mechanics_;
   InstrumentContact& contact_;
   SolverOptions solver_;
-  std::vector<double> system_;
-  bool factor_valid_ = false;  // the factor preconditions the current constraint set and material
-  bool refresh_wanted_ = false;  // background refresh: the factor serves, a fresh one is asked for
-  CholmodSolver cholmod_;
-  std::unique_ptr<BackgroundFactorization> background_;  // while SolverOptions::background_refresh was ever on
-  long background_starts_ = 0;  // background factorisations started since construction
-  Gmres gmres_;
-  ConjugateGradient cg_;
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Upper> eigen_ldlt_;
-  bool eigen_analyzed_ = false;
-  Eigen::VectorXd jacobi_;  // inverse diagonal of system_ (CG strategy)
+  NewtonMatrix matrix_;
+  TangentFactor factor_;
+  std::map<SolverOptions::Strategy, std::unique_ptr<UpdateStrategy>> strategies_;  // those chosen so far
+  UpdateStrategy* strategy_ = nullptr;           // of solver_.strategy
+  UpdateStrategy* contact_strategy_ = nullptr;   // its iterations with contacts
 
   Eigen::VectorXd x_, v_, x_start_;
   Eigen::VectorXd v_previous_;  // velocity of the step before the last (the predictor's acceleration)
