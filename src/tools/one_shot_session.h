@@ -1,8 +1,8 @@
-// One cloud registered the way the node will register its first cloud: the one-shot registration
-// (registration/one_shot.h) handed over to the tracker (SurfaceRegistration::register_one_shot),
-// then the targets read from the tracked model. Shared by the register and register_insilico
-// tools. It stands in for the node's tracking session (model, registration, its one-shot solver)
-// until that is a part of the core: then this class is that session's one call.
+// One cloud registered in one shot: the one-shot registration (registration/one_shot.h) handed
+// over to the tracker (SurfaceRegistration::register_one_shot, the call a tracking session makes
+// for its first cloud), then the targets read from the tracked model. Shared by the register and
+// register_insilico tools. The node's TrackingSession (session/tracking_session.h) does not make
+// that call yet: when it does, these tools are to compose it instead.
 #pragma once
 
 #include <pcl/point_cloud.h>

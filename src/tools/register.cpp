@@ -101,7 +101,7 @@ std::vector<Target> read_targets(const std::string& path, double scale) {
   return targets;
 }
 
-// The one call that registers: the node's path until its tracking session is a part of the core.
+// The one call that registers (one_shot_session.h).
 OneShotSession::Result register_once(const Scene& scene, const OneShotOptions& options, const std::vector<Target>& targets,
                                      const pcl::PointCloud<pcl::PointXYZ>& cloud,
                                      const std::optional<Eigen::Vector3d>& viewpoint) {
