@@ -24,44 +24,15 @@
 #include <vector>
 
 #include "liver_sim/geometry/closest_points.h"
+#include "liver_sim/registration/cloud_filter.h"
+#include "liver_sim/registration/one_shot.h"
+#include "liver_sim/registration/tracked_targets.h"
 #include "liver_sim/simulation/liver_model.h"
 #include "liver_sim/registration/state_compliance.h"
 #include "liver_sim/geometry/surface_locator.h"
 #include "liver_sim/registration/surface_patches.h"
 
 namespace liver_sim {
-
-// A point of interest that moves with the tissue.
-struct TrackedTarget {
-  enum class Kind { Probe, Bifurcation };
-  std::string name;
-  Kind kind;
-  Eigen::Vector3d position;  // m, at the current state
-};
-// The scene's probes (the tumour) and the vessel nodes where three or more beams meet
-// (bifurcations, named "<vessel> bifurcation <node>"), at the model's current state.
-std::vector<TrackedTarget> tracked_targets(const LiverModel& model);
-
-// Points an incoming cloud may hold before its preparation: a 5-megapixel structured-light
-// camera gives 5e6; the node converts the message and the preparation copies it (without a
-// voxel grid) or keeps a sum per voxel, so ten million points cost up to about 0.5 GB and
-// several frames.
-constexpr uint64_t kMaxCloudPoints = 10000000;
-// "" when a cloud of `points` points is within kMaxCloudPoints, else the refusal naming the bound.
-std::string cloud_size_error(uint64_t points);
-
-// "" when a voxel grid of `voxel` (m; 0: none) over `box` has at most 2^20 voxels along each
-// axis, else the refusal naming the bound.
-std::string voxel_grid_error(double voxel, const Eigen::AlignedBox3d& box);
-
-// Cloud preparation, shared by register_cloud and the node's callback: points moved by
-// `transform` (into the model frame), the non-finite ones dropped, those outside `box` dropped,
-// then a voxel grid of `voxel` (m; 0: none; each voxel's points become their centroid) and an
-// even stride down to `max_points`. Returns the number of finite points received. Throws
-// std::invalid_argument for a cloud beyond kMaxCloudPoints and for a voxel too fine for `box`
-// (voxel_grid_error).
-int prepare_cloud(const pcl::PointCloud<pcl::PointXYZ>& in, const Eigen::Isometry3d& transform,
-                  const Eigen::AlignedBox3d& box, double voxel, int max_points, pcl::PointCloud<pcl::PointXYZ>& out);
 
 struct RegistrationFrame {
   int input_points = 0;      // finite points received
@@ -103,6 +74,24 @@ class SurfaceRegistration {
   // springs of its last update that stepped, as does refine()'s.
   RegistrationFrame register_cloud(const pcl::PointCloud<pcl::PointXYZ>& cloud,
                                    const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
+
+  // One-shot registration (one_shot.h) of an organ deformed beyond what the frame-to-frame
+  // tracking reaches (the first cloud, or on request), its attachments unknown: `one_shot`
+  // (built from the same mesh and scene as the model) finds the rigid motion and the surface
+  // loads from the rest shape, starting from the current alignment. The registration then
+  // starts again from there (clear(), then): the model takes the registered shape, held there by
+  // the loads that hold it (its internal forces less the scene's loads at that shape; its
+  // supports stay where the shape put them), the rigid motion becomes the alignment applied to
+  // every cloud, and the cloud is registered as by register_cloud, so that tracking goes on.
+  // Throws std::invalid_argument, with nothing changed, for a cloud the one-shot registration
+  // refuses (one_shot.h) or a one-shot registration of another mesh; a refusal of the cloud by
+  // register_cloud comes after the hand-over.
+  struct OneShotReport {
+    OneShotResult one_shot;
+    RegistrationFrame frame;
+  };
+  OneShotReport register_one_shot(OneShotRegistration& one_shot, const pcl::PointCloud<pcl::PointXYZ>& cloud,
+                                  const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
 
   // The last cloud's next correspondence updates (up to options.frame_updates of those its
   // register_cloud left, fewer once the scene's solver.time_budget is spent: the first always
@@ -277,7 +266,8 @@ class SurfaceRegistration {
   std::vector<double> gains_;
   std::vector<Eigen::Vector3d> hidden_loads_;  // per patch (N)
   std::vector<Eigen::Vector3d> stepped_loads_;  // per patch (N): those of the model's last step that did not diverge
-  void set_model_loads();                      // hidden_loads_ as nodal loads on the model
+  Eigen::VectorXd shape_loads_;  // per DOF (N): those holding a one-shot registration's shape (empty: none)
+  void set_model_loads();        // hidden_loads_ as nodal loads on the model, with shape_loads_
 };
 
 }  // namespace liver_sim

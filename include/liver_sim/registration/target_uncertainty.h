@@ -42,6 +42,11 @@ struct Ellipsoid {
 };
 Ellipsoid ellipsoid_95(const Eigen::Matrix3d& covariance);
 
+// Each point's tetrahedron of T at positions x: the one that holds it best (largest smallest
+// barycentric weight; a point outside the mesh gets the nearest by that measure).
+std::vector<EmbeddedPoint> embed_points(const Eigen::MatrixX4i& T, const Eigen::VectorXd& x,
+                                        const std::vector<Eigen::Vector3d>& points);
+
 class TargetUncertainty {
  public:
   // Embeds tracked_targets(model) in the tetrahedra of the model's current positions (the

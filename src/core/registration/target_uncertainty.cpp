@@ -12,22 +12,27 @@ namespace {
 
 Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
 
-// The tetrahedron of T at positions x that holds p best (largest smallest barycentric weight).
-EmbeddedPoint embed(const Eigen::MatrixX4i& T, const Eigen::VectorXd& x, const Eigen::Vector3d& p) {
-  EmbeddedPoint best;
-  double best_min = -std::numeric_limits<double>::infinity();
-  for (int e = 0; e < T.rows(); ++e) {
-    const Eigen::Vector3d a = node(x, T(e, 0));
-    Eigen::Matrix3d edges;
-    for (int k = 1; k < 4; ++k) edges.col(k - 1) = node(x, T(e, k)) - a;
-    const Eigen::Vector3d w = edges.inverse() * (p - a);
-    const Eigen::Vector4d b(1 - w.sum(), w.x(), w.y(), w.z());
-    if (b.minCoeff() > best_min) best_min = b.minCoeff(), best.tet = e, best.barycentric = b;
-  }
-  return best;
-}
-
 }  // namespace
+
+std::vector<EmbeddedPoint> embed_points(const Eigen::MatrixX4i& T, const Eigen::VectorXd& x,
+                                        const std::vector<Eigen::Vector3d>& points) {
+  std::vector<Eigen::Matrix3d> inverse(T.rows());
+  for (int e = 0; e < T.rows(); ++e) {
+    Eigen::Matrix3d edges;
+    for (int k = 1; k < 4; ++k) edges.col(k - 1) = node(x, T(e, k)) - node(x, T(e, 0));
+    inverse[e] = edges.inverse();
+  }
+  std::vector<EmbeddedPoint> embedded(points.size());
+  for (size_t i = 0; i < points.size(); ++i) {
+    double best_min = -std::numeric_limits<double>::infinity();
+    for (int e = 0; e < T.rows(); ++e) {
+      const Eigen::Vector3d w = inverse[e] * (points[i] - node(x, T(e, 0)));
+      const Eigen::Vector4d b(1 - w.sum(), w.x(), w.y(), w.z());
+      if (b.minCoeff() > best_min) best_min = b.minCoeff(), embedded[i].tet = e, embedded[i].barycentric = b;
+    }
+  }
+  return embedded;
+}
 
 Ellipsoid ellipsoid_95(const Eigen::Matrix3d& covariance) {
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(covariance);
@@ -45,7 +50,9 @@ TargetUncertainty::TargetUncertainty(LiverModel& model, const UncertaintyOptions
   const std::string error = validate(checked);
   if (!error.empty()) throw std::invalid_argument(error);
   MechanicalModel& m = model.mechanics();
-  for (const TrackedTarget& t : tracked_targets(model)) embedding_.push_back(embed(m.mesh().T, model.positions(), t.position));
+  std::vector<Eigen::Vector3d> points;
+  for (const TrackedTarget& t : tracked_targets(model)) points.push_back(t.position);
+  embedding_ = embed_points(m.mesh().T, model.positions(), points);
 
   patches_ = make_surface_patches(m, options.patch_spacing);
   std::vector<Eigen::Triplet<double>> entries;
