@@ -9,7 +9,7 @@ export PATH="/usr/bin:/bin:/usr/sbin:/sbin:$PATH"
 export ROS_HOME="$WS/ros_home" ROS_LOG_DIR="$WS/ros_home/log" ROS_IP=127.0.0.1
 
 PACKAGES=(
-  build-essential cmake catkin libroscpp-dev ros-message-generation ros-message-runtime ros-std-msgs
+  build-essential cmake catkin libroscpp-dev libroslib-dev ros-message-generation ros-message-runtime ros-std-msgs
   libstd-msgs-dev libgeometry-msgs-dev ros-geometry-msgs libsensor-msgs-dev libvisualization-msgs-dev libstd-srvs-dev
   libdiagnostic-msgs-dev libdiagnostic-updater-dev libtf2-dev libtf2-ros-dev libtf2-geometry-msgs-dev libtf2-eigen-dev
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure
