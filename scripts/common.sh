@@ -19,6 +19,8 @@ PACKAGES=(
   python3-rospy python3-rosbag python3-geometry-msgs python3-sensor-msgs python3-std-srvs
   python3-visualization-msgs python3-diagnostic-msgs python3-matplotlib python3-numpy clang libclang-rt-14-dev
   python3-gmsh libgmsh-dev stress-ng
+  # The scripts' and tests' Python: catkin's module (package_paths.py), YAML, tf and clock messages.
+  python3-catkin python3-yaml python3-tf2-msgs python3-rosgraph-msgs catkin-lint
   # The tools' command lines, JSON output and calibrate's minimiser (header-only).
   libcli11-dev nlohmann-json3-dev libboost-dev
   # The ROS command-line tools: rostopic, rosservice, rosnode, rosrun, static_transform_publisher.
