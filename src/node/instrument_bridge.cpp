@@ -118,7 +118,8 @@ void InstrumentBridge::publish(const std_msgs::Header& header) {
     w.wrench.force = to_vector(P.linear().transpose() * r.force);
     w.wrench.torque = to_vector(P.linear().transpose() * r.torque);
     if (topics != topics_.end()) topics->second.wrench_pub.publish(w);
-    if (s.frame.empty() && model.instrument(s.index).enabled) {
+    if (s.frame.empty() && model.instrument(s.index).enabled && tip_stamps_[w.header.frame_id] != header.stamp) {
+      tip_stamps_[w.header.frame_id] = header.stamp;
       geometry_msgs::TransformStamped t;
       t.header = header;
       t.child_frame_id = w.header.frame_id;
