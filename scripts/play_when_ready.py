@@ -43,6 +43,8 @@ def main():
                       args.timeout, args.bag)
     sub.unregister()
     rospy.signal_shutdown("playing")
+    sys.stdout.flush()  # exec drops what is still buffered
+    sys.stderr.flush()
     os.execvp("rosbag", ["rosbag", "play", "--clock", "--rate", repr(args.rate), args.bag])
 
 
