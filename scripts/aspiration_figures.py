@@ -25,9 +25,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SCENE = os.path.join(REPO, "config", "scenes", "aspiration_tube.yaml")
-ANNULUS_SCENE = os.path.join(REPO, "config", "scenes", "aspiration_cube.yaml")
+sys.path.insert(0, os.path.dirname(os.path.realpath(__file__)))  # package_paths, also through catkin's relay
+from package_paths import output_folder, package_file, tool  # noqa: E402
+
+SCENE = package_file("config", "scenes", "aspiration_tube.yaml")
+ANNULUS_SCENE = package_file("config", "scenes", "aspiration_cube.yaml")
 
 
 def run(simulate, sets, extra, scene=SCENE):
@@ -55,8 +57,8 @@ def mid_cut_profile(points, disp, size=0.015):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--simulate", default=os.path.join(REPO, "build/ws/devel/lib/liver_sim/simulate"))
-    ap.add_argument("--out", default=os.path.join(REPO, "doc"))
+    ap.add_argument("--simulate", default=tool("simulate"))
+    ap.add_argument("--out", default=output_folder())
     ap.add_argument("--steps", type=int, default=200, help="dynamic time steps")
     ap.add_argument("--dt", type=float, default=0.005, help="dynamic time step (s)")
     args = ap.parse_args()

@@ -22,13 +22,15 @@ import os
 import subprocess
 import sys
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-BENCH = os.path.join(REPO, "build/ws/devel/lib/liver_sim/bench")
-CUBE = os.path.join(REPO, "config/scenes/aspiration_cube.yaml")
-PHANTOM = os.path.join(REPO, "config/scenes/liver_phantom.yaml")
-PROBE_CUBE = os.path.join(REPO, "config/scenes/probe_cube.yaml")
-TUBE = os.path.join(REPO, "config/scenes/aspiration_tube.yaml")
-INSTRUMENTS = os.path.join(REPO, "config/bench")
+sys.path.insert(0, os.path.dirname(os.path.realpath(__file__)))  # package_paths, also through catkin's relay
+from package_paths import output_folder, package_file, package_root, tool  # noqa: E402
+
+BENCH = tool("bench")
+CUBE = package_file("config", "scenes", "aspiration_cube.yaml")
+PHANTOM = package_file("config", "scenes", "liver_phantom.yaml")
+PROBE_CUBE = package_file("config", "scenes", "probe_cube.yaml")
+TUBE = package_file("config", "scenes", "aspiration_tube.yaml")
+INSTRUMENTS = package_file("config", "bench")
 
 ALL = ["newton_krylov:30:1e-6", "newton_krylov:1:0", "full_newton:30:1e-6", "full_newton_eigen:30:1e-6",
        "reused_factor_cg:30:1e-6", "cg:30:1e-6", "modified_newton:1:0", "modified_newton:2:0"]
@@ -72,10 +74,10 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--bench", default=BENCH)
-    ap.add_argument("--out", default=os.path.join(REPO, "doc"))
+    ap.add_argument("--out", default=output_folder())
     args = ap.parse_args()
     if not os.path.exists(args.bench):
-        sys.exit(f"{args.bench} not found: build first (scripts/run.sh)")
+        sys.exit(f"{args.bench} not found: build first (scripts/run.sh), or source a workspace that has liver_sim")
     rows = []
     for label, scene, sets, frames, strategies, instruments, free in cases(args.quick):
         cmd = [args.bench, "--scene", scene, "--frames", str(frames)]
@@ -89,8 +91,8 @@ def main():
         out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
         for row in csv.DictReader(io.StringIO(out)):
             row["case"] = label
-            row["scene"] = os.path.relpath(row["scene"], REPO)  # the CSV is committed: no machine path
-            row["instruments"] = os.path.relpath(instruments, REPO) if instruments else ""
+            row["scene"] = os.path.relpath(row["scene"], package_root())  # the CSV is committed: no machine path
+            row["instruments"] = os.path.relpath(instruments, package_root()) if instruments else ""
             row["contact_free_ratio"] = ""
             if free:
                 same = [r for r in rows if r["case"] == free and r["strategy"] == row["strategy"]

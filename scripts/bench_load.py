@@ -16,10 +16,12 @@ import os
 import subprocess
 import sys
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-BENCH = os.path.join(REPO, "build/ws/devel/lib/liver_sim/bench")
-SCENES = os.path.join(REPO, "config/scenes")
-SWEEPS = os.path.join(REPO, "config/bench")
+sys.path.insert(0, os.path.dirname(os.path.realpath(__file__)))  # package_paths, also through catkin's relay
+from package_paths import output_folder, package_file, package_root, tool  # noqa: E402
+
+BENCH = tool("bench")
+SCENES = package_file("config", "scenes")
+SWEEPS = package_file("config", "bench")
 STRATEGY = "modified_newton:1:0"
 
 # label, scene, --set, instruments, frames
@@ -36,7 +38,7 @@ def main():
     ap.add_argument("--bench", default=BENCH)
     ap.add_argument("--threads", default="1,2", help="solver.threads of the runs, comma-separated")
     ap.add_argument("--load", type=int, default=2, help="busy threads beside the loaded runs")
-    ap.add_argument("--csv", default=os.path.join(REPO, "doc/bench_load.csv"))
+    ap.add_argument("--csv", default=os.path.join(output_folder(), "bench_load.csv"))
     args = ap.parse_args()
     rows = []
     for label, scene, sets, instruments, frames in CASES:
@@ -50,7 +52,7 @@ def main():
         out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
         for row in csv.DictReader(io.StringIO(out)):
             row["case"] = label
-            row["scene"] = os.path.relpath(row["scene"], REPO)  # the CSV is committed: no machine path
+            row["scene"] = os.path.relpath(row["scene"], package_root())  # the CSV is committed: no machine path
             rows.append(row)
     with open(args.csv, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=["case"] + [k for k in rows[0] if k != "case"])

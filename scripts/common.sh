@@ -9,7 +9,7 @@ export PATH="/usr/bin:/bin:/usr/sbin:/sbin:$PATH"
 export ROS_HOME="$WS/ros_home" ROS_LOG_DIR="$WS/ros_home/log" ROS_IP=127.0.0.1
 
 PACKAGES=(
-  build-essential cmake catkin libroscpp-dev ros-message-generation ros-message-runtime ros-std-msgs
+  build-essential cmake catkin libroscpp-dev libroslib-dev ros-message-generation ros-message-runtime ros-std-msgs
   libstd-msgs-dev libgeometry-msgs-dev ros-geometry-msgs libsensor-msgs-dev libvisualization-msgs-dev libstd-srvs-dev
   libdiagnostic-msgs-dev libdiagnostic-updater-dev libtf2-dev libtf2-ros-dev libtf2-geometry-msgs-dev libtf2-eigen-dev
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure
@@ -20,6 +20,8 @@ PACKAGES=(
   python3-visualization-msgs python3-diagnostic-msgs python3-matplotlib python3-numpy clang libclang-rt-14-dev
   python3-gmsh libgmsh-dev stress-ng
   libvtk9-dev zlib1g-dev   # make_model: re-surfacing (VTK), compressed label maps (zlib)
+  # The scripts' and tests' Python: catkin's module (package_paths.py), YAML, tf and clock messages.
+  python3-catkin python3-yaml python3-tf2-msgs python3-rosgraph-msgs catkin-lint
   # The tools' command lines, JSON output and calibrate's minimiser (header-only).
   libcli11-dev nlohmann-json3-dev libboost-dev
   # The ROS command-line tools: rostopic, rosservice, rosnode, rosrun, static_transform_publisher.

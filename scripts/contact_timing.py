@@ -16,8 +16,10 @@ import tempfile
 
 import yaml
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SIMULATE = os.path.join(REPO, "build/ws/devel/lib/liver_sim/simulate")
+sys.path.insert(0, os.path.dirname(os.path.realpath(__file__)))  # package_paths, also through catkin's relay
+from package_paths import package_file, tool  # noqa: E402
+
+SIMULATE = tool("simulate")
 
 # (scene, probe tip xy, top surface z at that xy, [(label, radius, depth)])
 CASES = [
@@ -29,9 +31,9 @@ CASES = [
 
 
 def scene_for(name, xy, top, radius, depth, steps):
-    with open(os.path.join(REPO, "config/scenes", name)) as f:
+    base = package_file("config", "scenes")
+    with open(os.path.join(base, name)) as f:
         s = yaml.safe_load(f)
-    base = os.path.join(REPO, "config/scenes")
     if "file" in s["mesh"]:
         s["mesh"]["file"] = os.path.join(base, s["mesh"]["file"])
     for v in s.get("vessels", []):
@@ -59,7 +61,7 @@ def run(scene):
 
 def main():
     if not os.path.exists(SIMULATE):
-        sys.exit(f"{SIMULATE} not found: build first (scripts/run.sh)")
+        sys.exit(f"{SIMULATE} not found: build first (scripts/run.sh), or source a workspace that has liver_sim")
     print("| mesh | probe radius | contacts | step median (ms) | contact phase (ms/step) | Gauss-Seidel sweeps/step | Newton iterations/step | status |")
     print("|---|---:|---:|---:|---:|---:|---:|---|")
     for name, xy, top, probes in CASES:

@@ -14,6 +14,7 @@ import argparse
 import os
 import re
 import subprocess
+import sys
 import tempfile
 
 import numpy as np
@@ -23,8 +24,8 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs import point_cloud2
 from std_msgs.msg import Header
 
-# The repository itself, also through the workspace's links (rosrun runs build/ws/src/liver_sim/scripts/...).
-REPO = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
+sys.path.insert(0, os.path.dirname(os.path.realpath(__file__)))  # package_paths, also through catkin's relay
+from package_paths import package_file, tool  # noqa: E402
 RADIUS = 0.0025   # m, probe tip radius (launch/liver_sim.launch's instrument_radius)
 SURFACE_Z = 0.039  # m, height of the sagged surface under the probe (static equilibrium)
 
@@ -44,12 +45,12 @@ def probe_position(t, duration):
     return x0 - 0.010, y0, pressed + (above - pressed) * (s - 0.7) / 0.3
 
 
-def sagged_top_surface():
+def sagged_top_surface(simulate):
     """Triangles (n, 3, 3) of the phantom's upper right-lobe surface at its equilibrium."""
     with tempfile.TemporaryDirectory() as tmp:
         vtu = os.path.join(tmp, "equilibrium.vtu")
-        subprocess.run([os.path.join(REPO, "build/ws/devel/lib/liver_sim/simulate"), "--scene",
-                        os.path.join(REPO, "config/scenes/liver_phantom.yaml"), "--vtu", vtu, "--quiet"],
+        subprocess.run([simulate, "--scene", package_file("config", "scenes", "liver_phantom.yaml"),
+                        "--vtu", vtu, "--quiet"],
                        check=True, stdout=subprocess.DEVNULL)
         text = open(vtu).read()
     arrays = re.findall(r"<DataArray[^>]*>\n(.*?)</DataArray>", text, re.S)
@@ -82,9 +83,10 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("out")
     ap.add_argument("--duration", type=float, default=10.0, help="session length (s)")
+    ap.add_argument("--simulate", default=tool("simulate"), help="the simulate tool (default: the workspace's)")
     args = ap.parse_args()
     rng = np.random.default_rng(0)
-    surface = sagged_top_surface()
+    surface = sagged_top_surface(args.simulate)
     start = rospy.Time.from_sec(1.0e9)
     with rosbag.Bag(args.out, "w") as bag:
         for k in range(int(args.duration * 30) + 1):  # poses at 30 Hz

@@ -296,13 +296,7 @@ TEST(Instruments, RefusalsNameTheFieldAndChangeNothing) {
   c.type = "tube";
   c.suction = -100;
   refused(c, "suction");
-  c.suction = 100;
-  c.frame = "no_such_frame";
-  refused(c, "no_such_frame");
-  // tf's reason told once, not once for every retry of the wait (as it was: 60 times).
-  for (const std::string& t : texts) {
-    if (t.find("no_such_frame") != std::string::npos) EXPECT_EQ(t.find("canTransform"), t.rfind("canTransform")) << t;
-  }
+  // A frame tf does not know yet is not refused: the instrument waits for it (instrument_tf_late.test).
   c = liver_sim::InstrumentCommand();
   c.name = "bad name";
   c.type = "probe";

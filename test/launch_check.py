@@ -45,7 +45,7 @@ class LaunchFiles(unittest.TestCase):
 
     def test_playback_keeps_the_node_when_the_bag_ends(self):
         launch = ET.parse(os.path.join(PACKAGE, "launch", "playback.launch")).getroot()
-        player = next(n for n in launch.iter("node") if n.get("pkg") == "rosbag")
+        player = next(n for n in launch.iter("node") if n.get("name") == "player")
         self.assertNotEqual(player.get("required", "false").lower(), "true")
         self.assertTrue(any(i.get("file", "").endswith("liver_sim.launch") for i in launch.iter("include")))
 

@@ -283,6 +283,30 @@ TEST_F(Reconfigure, NaNAndUnknownStrategiesAreRefused) {
   EXPECT_EQ(status_.rejected_inputs, rejected + 2);
 }
 
+// A value past the config's bounds is clamped to them and said, naming the value asked: in the
+// reply, in ~status (and the log). dynamic_reconfigure's own server clamps before anyone sees the
+// request: friction 5 became 2 without a word.
+TEST_F(Reconfigure, ValuesPastTheBoundsAreClampedAndSaid) {
+  auto friction = [](const dynamic_reconfigure::Config& c) {
+    for (const auto& d : c.doubles)
+      if (d.name == "friction") return d.value;
+    return std::nan("");
+  };
+  const double before = friction(set({}));
+  statuses_.clear();
+  const unsigned rejected = status_.rejected_inputs;
+  EXPECT_EQ(friction(set({{"friction", 5.0}})), 2.0);
+  EXPECT_TRUE(wait_for(
+      [] {
+        return std::any_of(statuses_.begin(), statuses_.end(),
+                           [](const auto& s) { return s.text.find("friction 5 -> 2") != std::string::npos; });
+      },
+      10.0))
+      << status_.text;
+  EXPECT_EQ(status_.rejected_inputs, rejected) << "a clamp is not a refusal";
+  EXPECT_EQ(friction(set({{"friction", before}})), before);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {

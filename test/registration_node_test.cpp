@@ -6,6 +6,7 @@
 // is downsampled and registered; empty, NaN-filled, unknown-frame and too small clouds are
 // refused, counted, and change nothing; the targets' covariances and ellipsoids follow; an
 // analysis whose estimates change the model makes an idle node step.
+#include <cctype>
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <geometry_msgs/PoseArray.h>
 #include <gtest/gtest.h>
@@ -28,6 +29,14 @@
 namespace {
 
 using liver_sim_test::wait_for;
+
+// The label rviz shows for a target: a probe's name; a bifurcation's vessel initial and number
+// ("portal bifurcation 3": "P3").
+std::string label(const liver_sim::TrackedTarget& t) {
+  if (t.kind != liver_sim::TrackedTarget::Kind::Bifurcation) return t.name;
+  const size_t digits = t.name.find_last_not_of("0123456789") + 1;
+  return std::string(1, static_cast<char>(std::toupper(static_cast<unsigned char>(t.name[0])))) + t.name.substr(digits);
+}
 
 liver_sim::SimulationStatus status;
 geometry_msgs::PoseArray target_poses;
@@ -134,10 +143,10 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
   size_t spheres = 0, names = 0;  // beside them: the names and the colour legend
   for (const visualization_msgs::Marker& m : target_markers.markers) {
     spheres += m.type == visualization_msgs::Marker::SPHERE;
-    if (m.ns == "target_names" && m.id < static_cast<int>(before.size())) names += m.text == before[m.id].name;
+    if (m.ns == "target_names" && m.id < static_cast<int>(before.size())) names += m.text == label(before[m.id]);
   }
   EXPECT_EQ(spheres, before.size());
-  EXPECT_EQ(names, before.size()) << "each target's marker name is its name in the core";
+  EXPECT_EQ(names, before.size()) << "each target's label names it in the core";
   for (size_t i = 0; i < before.size(); ++i) {
     const auto& p = target_poses.poses[i].position;
     EXPECT_LT((Eigen::Vector3d(p.x, p.y, p.z) - before[i].position).norm(), 1e-6) << before[i].name;

@@ -133,10 +133,13 @@ TEST(MeshMarker, TargetNamesAndLegend) {
     EXPECT_EQ(m.ns, "target_names");
     EXPECT_EQ(m.id, static_cast<int>(i));
     EXPECT_EQ(m.type, visualization_msgs::Marker::TEXT_VIEW_FACING);
-    EXPECT_EQ(m.text, targets[i].name);
-    EXPECT_NEAR(m.pose.position.z, targets[i].position.z() + 0.004, 1e-12);
+    EXPECT_GT(m.pose.position.z, targets[i].position.z());  // above its target
+    EXPECT_NEAR(m.pose.position.x, targets[i].position.x(), 1e-12);
+    EXPECT_GE(m.scale.z, 0.005) << "text of 5 mm or more: readable beside a 20 cm liver";
     EXPECT_EQ(m.header.frame_id, "liver");
   }
+  EXPECT_EQ(markers.markers[0].text, "tumour_centre");
+  EXPECT_EQ(markers.markers[1].text, "P3");
 
   markers.markers.clear();
   const Eigen::AlignedBox3d box(Eigen::Vector3d(-0.1, -0.05, -0.03), Eigen::Vector3d(0.1, 0.05, 0.06));
@@ -162,6 +165,55 @@ TEST(MeshMarker, TargetNamesAndLegend) {
   EXPECT_NE(std::find(texts.begin(), texts.end(), "4"), texts.end());
   EXPECT_NE(std::find(texts.begin(), texts.end(), ">= 8"), texts.end());
   EXPECT_NE(std::find(texts.begin(), texts.end(), "displacement (mm)"), texts.end());
+}
+
+// Labels of targets crowded together (a cluster of bifurcations 2 mm apart) end apart: no two
+// text boxes (0.6 of the height wide per character, the height high) overlap as seen from the
+// front, and each stays straight above its target.
+TEST(MeshMarker, CrowdedLabelsDoNotOverlap) {
+  const double h = 0.006;
+  std::vector<Eigen::Vector3d> anchors;
+  std::vector<std::string> texts;
+  for (int i = 0; i < 12; ++i) {
+    anchors.emplace_back(0.002 * (i % 4), 0.001 * i, 0.002 * (i / 4));
+    texts.push_back(i == 5 ? "tumour_centre" : "P" + std::to_string(i));
+  }
+  const std::vector<Eigen::Vector3d> at = label_positions(anchors, texts, h);
+  ASSERT_EQ(at.size(), anchors.size());
+  for (size_t i = 0; i < at.size(); ++i) {
+    EXPECT_GT(at[i].z(), anchors[i].z());
+    EXPECT_EQ(at[i].x(), anchors[i].x());
+    for (size_t j = 0; j < i; ++j) {
+      const double apart_x = std::abs(at[i].x() - at[j].x()) - 0.3 * h * (texts[i].size() + texts[j].size());
+      const double apart_z = std::abs(at[i].z() - at[j].z()) - h;
+      EXPECT_TRUE(apart_x >= 0 || apart_z >= 0) << texts[i] << " overlaps " << texts[j];
+    }
+  }
+}
+
+// The patient's orientation: arrows along +x, +y, +z labelled L, P, S, outside the model's box.
+TEST(MeshMarker, OrientationAxesNameThePatientsSides) {
+  const Eigen::AlignedBox3d box(Eigen::Vector3d(-0.1, -0.05, -0.03), Eigen::Vector3d(0.1, 0.05, 0.06));
+  std_msgs::Header header;
+  visualization_msgs::MarkerArray markers;
+  append_orientation_axes(box, header, markers);
+  std::map<std::string, Eigen::Vector3d> label_direction;
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+  for (const visualization_msgs::Marker& m : markers.markers) {
+    EXPECT_EQ(m.ns, "orientation");
+    if (m.type == visualization_msgs::Marker::ARROW) {
+      ASSERT_EQ(m.points.size(), 2u);
+      origin = Eigen::Vector3d(m.points[0].x, m.points[0].y, m.points[0].z);
+      EXPECT_FALSE(box.contains(origin));
+    }
+  }
+  for (const visualization_msgs::Marker& m : markers.markers)
+    if (m.type == visualization_msgs::Marker::TEXT_VIEW_FACING)
+      label_direction[m.text] = (Eigen::Vector3d(m.pose.position.x, m.pose.position.y, m.pose.position.z) - origin).normalized();
+  ASSERT_EQ(label_direction.size(), 3u);
+  EXPECT_GT(label_direction["L"].x(), 0.99);  // LPS: +x the patient's left
+  EXPECT_GT(label_direction["P"].y(), 0.99);
+  EXPECT_GT(label_direction["S"].z(), 0.99);
 }
 
 }  // namespace

@@ -34,19 +34,12 @@ void InstrumentBridge::open(const std::string& name) {
 
 void InstrumentBridge::on_command(const InstrumentCommand::ConstPtr& msg) {
   const InstrumentRequest request = to_request(*msg);
-  std::string error = instrument_name_error(request.name);
-  if (!error.empty()) return session_.refuse("instrument_command: " + error);
-  // A frame tf does not know within the timeout is refused: a typo would otherwise hold the
-  // instrument out of the scene without a word.
-  if (!request.remove && !request.frame.empty()) {
-    const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(tf_timeout_);
-    while (!tf_.canTransform(frame_id_, request.frame, ros::Time(0)) && ros::WallTime::now() < end)
-      ros::WallDuration(0.005).sleep();
-    if (!tf_.canTransform(frame_id_, request.frame, ros::Time(0), &error))
-      return session_.refuse("instrument_command " + request.name + ": frame '" + request.frame + "' unknown to tf (" +
-                             error + ")");
-  }
   if (!session_.submit(request) || request.remove) return;
+  // Trackers start in any order: an instrument whose frame tf does not know yet waits out of the
+  // scene, said in ~status until it joins, at the first frame that finds its frame.
+  if (!request.frame.empty() && !tf_.canTransform(frame_id_, request.frame, ros::Time(0)))
+    session_.notices().tell("instrument " + request.name + ": tf frame '" + request.frame +
+                            "' not known yet; out of the scene until it is");
   std::lock_guard<std::mutex> lock(mutex_);
   open(request.name);
 }
@@ -125,7 +118,8 @@ void InstrumentBridge::publish(const std_msgs::Header& header) {
     w.wrench.force = to_vector(P.linear().transpose() * r.force);
     w.wrench.torque = to_vector(P.linear().transpose() * r.torque);
     if (topics != topics_.end()) topics->second.wrench_pub.publish(w);
-    if (s.frame.empty() && model.instrument(s.index).enabled) {
+    if (s.frame.empty() && model.instrument(s.index).enabled && tip_stamps_[w.header.frame_id] != header.stamp) {
+      tip_stamps_[w.header.frame_id] = header.stamp;
       geometry_msgs::TransformStamped t;
       t.header = header;
       t.child_frame_id = w.header.frame_id;

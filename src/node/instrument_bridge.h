@@ -57,6 +57,10 @@ class InstrumentBridge {
   std::mutex mutex_;  // guards topics_
   std::map<std::string, Topics> topics_;
   bool markers_due_ = true;  // simulation thread
+  // The stamp each tip frame was last broadcast with (simulation thread): a frame goes out again
+  // only with another, as tf takes a transform once per stamp (a bag's clock that stands
+  // still would otherwise repeat it, and every listener warn TF_REPEATED_DATA).
+  std::map<std::string, ros::Time> tip_stamps_;
 };
 
 }  // namespace liver_sim

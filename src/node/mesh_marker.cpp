@@ -1,6 +1,7 @@
 #include "mesh_marker.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <numeric>
@@ -105,8 +106,56 @@ void fill_vessel_marker(const LiverModel& model, visualization_msgs::Marker& mar
   }
 }
 
+std::string target_label(const TrackedTarget& target) {
+  if (target.kind != TrackedTarget::Kind::Bifurcation || target.name.empty()) return target.name;
+  // "<vessel> bifurcation <k>": the vessel's initial and k.
+  const size_t number = target.name.find_last_not_of("0123456789");
+  return std::string(1, static_cast<char>(std::toupper(static_cast<unsigned char>(target.name[0])))) +
+         (number == std::string::npos ? target.name : target.name.substr(number + 1));
+}
+
+std::vector<Eigen::Vector3d> label_positions(const std::vector<Eigen::Vector3d>& anchors,
+                                             const std::vector<std::string>& texts, double height) {
+  // Text of TEXT_VIEW_FACING markers is about 0.6 of its height wide per character; a label
+  // keeps a fifth of its height free around it.
+  auto half_width = [&](size_t i) { return 0.3 * height * texts[i].size() + 0.1 * height; };
+  std::vector<size_t> order(anchors.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return anchors[a].z() < anchors[b].z(); });
+  std::vector<Eigen::Vector3d> at(anchors.size());
+  const double line = 1.2 * height;
+  // Overlap in z is tested against exactly the height a raise sets (z_j + line), so that a label
+  // raised above j no longer meets j: every raise lifts it strictly, to one of finitely many heights.
+  auto overlaps = [&](size_t i, size_t j) {
+    return std::abs(at[i].x() - at[j].x()) < half_width(i) + half_width(j) && at[i].z() < at[j].z() + line &&
+           at[j].z() < at[i].z() + line;
+  };
+  std::vector<size_t> placed;
+  for (size_t i : order) {
+    at[i] = anchors[i] + Eigen::Vector3d(0, 0, height);
+    for (bool moved = true; moved;) {
+      moved = false;
+      for (size_t j : placed)
+        if (overlaps(i, j)) {
+          at[i].z() = at[j].z() + line;
+          moved = true;
+        }
+    }
+    placed.push_back(i);
+  }
+  return at;
+}
+
 void append_target_names(const std::vector<TrackedTarget>& targets, const std_msgs::Header& header,
                          visualization_msgs::MarkerArray& markers) {
+  constexpr double kHeight = 0.006;  // m, text height: readable in the package's view of a liver
+  std::vector<Eigen::Vector3d> anchors;
+  std::vector<std::string> texts;
+  for (const TrackedTarget& t : targets) {
+    anchors.push_back(t.position);
+    texts.push_back(target_label(t));
+  }
+  const std::vector<Eigen::Vector3d> at = label_positions(anchors, texts, kHeight);
   for (size_t i = 0; i < targets.size(); ++i) {
     visualization_msgs::Marker m;
     m.header = header;
@@ -114,13 +163,60 @@ void append_target_names(const std::vector<TrackedTarget>& targets, const std_ms
     m.id = static_cast<int>(i);
     m.type = visualization_msgs::Marker::TEXT_VIEW_FACING;
     m.action = visualization_msgs::Marker::ADD;
-    m.pose.position.x = targets[i].position.x();
-    m.pose.position.y = targets[i].position.y();
-    m.pose.position.z = targets[i].position.z() + 0.004;
+    m.pose.position.x = at[i].x();
+    m.pose.position.y = at[i].y();
+    m.pose.position.z = at[i].z();
     m.pose.orientation.w = 1;
-    m.scale.z = 0.003;  // m, text height
-    m.color.r = m.color.g = m.color.b = m.color.a = 1.0f;
-    m.text = targets[i].name;
+    m.scale.z = kHeight;
+    const bool vessel = targets[i].kind == TrackedTarget::Kind::Bifurcation;
+    m.color.r = vessel ? 0.75f : 1.0f;  // the targets' hues, lightened: bifurcations blue, probes red
+    m.color.g = vessel ? 0.8f : 0.7f;
+    m.color.b = vessel ? 1.0f : 0.7f;
+    m.color.a = 1.0f;
+    m.text = texts[i];
+    markers.markers.push_back(m);
+  }
+}
+
+void append_orientation_axes(const Eigen::AlignedBox3d& box, const std_msgs::Header& header,
+                             visualization_msgs::MarkerArray& markers) {
+  const double length = 0.2 * box.sizes().minCoeff();
+  const Eigen::Vector3d origin(box.min().x() - 0.015, box.min().y(), box.min().z());
+  const char* names[3] = {"L", "P", "S"};  // LPS: +x the patient's left, +y posterior, +z superior
+  for (int axis = 0; axis < 3; ++axis) {
+    visualization_msgs::Marker m;
+    m.header = header;
+    m.ns = "orientation";
+    m.id = axis;
+    m.type = visualization_msgs::Marker::ARROW;
+    m.action = visualization_msgs::Marker::ADD;
+    m.pose.orientation.w = 1;
+    const Eigen::Vector3d tip = origin + length * Eigen::Vector3d::Unit(axis);
+    for (const Eigen::Vector3d& p : {origin, tip}) {
+      geometry_msgs::Point q;
+      q.x = p.x();
+      q.y = p.y();
+      q.z = p.z();
+      m.points.push_back(q);
+    }
+    m.scale.x = 0.1 * length;   // shaft diameter
+    m.scale.y = 0.2 * length;   // head diameter
+    m.scale.z = 0.25 * length;  // head length
+    m.color.r = axis == 0 ? 1.0f : 0.3f;  // x red, y green, z blue, as rviz draws axes
+    m.color.g = axis == 1 ? 1.0f : 0.3f;
+    m.color.b = axis == 2 ? 1.0f : 0.3f;
+    m.color.a = 1.0f;
+    markers.markers.push_back(m);
+    m.id = 3 + axis;
+    m.type = visualization_msgs::Marker::TEXT_VIEW_FACING;
+    m.points.clear();
+    const Eigen::Vector3d label = origin + 1.35 * length * Eigen::Vector3d::Unit(axis);
+    m.pose.position.x = label.x();
+    m.pose.position.y = label.y();
+    m.pose.position.z = label.z();
+    m.scale.x = m.scale.y = 0;
+    m.scale.z = 0.008;  // m, text height
+    m.text = names[axis];
     markers.markers.push_back(m);
   }
 }

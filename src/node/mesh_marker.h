@@ -7,6 +7,7 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include <Eigen/Geometry>
+#include <string>
 #include <vector>
 
 #include "liver_sim/simulation/liver_model.h"
@@ -39,10 +40,27 @@ void fill_mesh_marker(const LiverModel& model, const Eigen::VectorXd& reference,
 // LINE_LIST of the vessel beams at their current positions (m), one colour per vessel tree.
 void fill_vessel_marker(const LiverModel& model, visualization_msgs::Marker& marker);
 
-// Each target's name as a TEXT_VIEW_FACING marker 4 mm above it (namespace "target_names", id =
-// the target's index, as the target spheres), so that the spheres stay plain.
+// A target's label: a probe's name; a bifurcation's vessel initial and number ("portal
+// bifurcation 3": "P3"), short enough to stay apart from its neighbours.
+std::string target_label(const TrackedTarget& target);
+
+// Where labels of `height` (m) go: above their anchors, each raised by a line until it overlaps
+// no label placed before it (the lower anchors first) as seen from the front (x across, z up:
+// the package's rviz view); the text's width estimated from its length.
+std::vector<Eigen::Vector3d> label_positions(const std::vector<Eigen::Vector3d>& anchors,
+                                             const std::vector<std::string>& texts, double height);
+
+// Each target's label as a TEXT_VIEW_FACING marker 6 mm high above it, placed by
+// label_positions (namespace "target_names", id = the target's index, as the target spheres), so
+// that the spheres stay plain.
 void append_target_names(const std::vector<TrackedTarget>& targets, const std_msgs::Header& header,
                          visualization_msgs::MarkerArray& markers);
+
+// The patient's axes at the -x, -y, -z corner of `box` (the model's rest bounding box, m): arrows
+// along +x, +y, +z labelled L, P, S (the model frame is LPS: the patient's left, posterior,
+// superior); namespace "orientation".
+void append_orientation_axes(const Eigen::AlignedBox3d& box, const std_msgs::Header& header,
+                             visualization_msgs::MarkerArray& markers);
 
 // The colour scale's legend beside `box` (the model's rest bounding box, m): a vertical bar of
 // cubes from 0 (bottom) to scale_max (top, m) beside the box's +x side, labelled in mm, and a

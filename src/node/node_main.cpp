@@ -1,5 +1,6 @@
 // liver_sim_node's main: the options, the simulation thread's processors and scheduling, the
 // callbacks' spinner and the heartbeat on the other processors, then the loop on this thread.
+#include <ros/package.h>
 #include <ros/ros.h>
 
 #include <algorithm>
@@ -18,7 +19,9 @@ int main(int argc, char** argv) {
   liver_sim::NodeOptions options;
   const std::vector<int> processors = liver_sim::processors_of_calling_thread();
   try {
-    options = liver_sim::read_node_options(pnh, LIVER_SIM_DEFAULT_SCENE);
+    // The default scene from where ROS finds the package (its install space's share folder, or
+    // its sources beside a devel space), not from where it was built.
+    options = liver_sim::read_node_options(pnh, ros::package::getPath("liver_sim") + "/config/scenes/liver_phantom.yaml");
   } catch (const std::exception& e) {
     ROS_FATAL("liver_sim: %s", e.what());
     return 1;

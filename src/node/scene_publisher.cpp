@@ -90,8 +90,9 @@ void ScenePublisher::publish_targets(const std_msgs::Header& header) {
   }
   append_target_names(targets, header, markers);
   const Eigen::MatrixX3d& rest = model.mesh().V;
-  append_colour_legend(Eigen::AlignedBox3d(rest.colwise().minCoeff().transpose(), rest.colwise().maxCoeff().transpose()),
-                       color_scale_max_, header, markers);
+  const Eigen::AlignedBox3d box(rest.colwise().minCoeff().transpose(), rest.colwise().maxCoeff().transpose());
+  append_colour_legend(box, color_scale_max_, header, markers);
+  append_orientation_axes(box, header, markers);
   target_marker_pub_.publish(markers);
   target_pose_pub_.publish(poses);
   const std::vector<TargetUncertainty::Covariance>& covariances = session_.covariances();

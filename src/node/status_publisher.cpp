@@ -73,7 +73,9 @@ std_msgs::Header StatusPublisher::publish(const StepResult& r, double rate) {
   s.target_radius_95 = largest_radius_95();
   s.faults = session_.faults();
   for (bool held : session_.registration().supports_held()) s.supports_held += held;
+  std::string waiting;  // instruments whose tf frame has not appeared yet
   for (const InstrumentSlots::Slot& slot : session_.instruments()) {
+    if (slot.waiting) waiting += (waiting.empty() ? "" : ", ") + slot.name + " (frame '" + slot.frame + "')";
     if (slot.index < 0 || !model.instrument(slot.index).enabled) continue;
     s.instrument_names.push_back(slot.name);
     s.instrument_contacts.push_back(model.instrument_reaction(slot.index).contacts);
@@ -83,7 +85,9 @@ std_msgs::Header StatusPublisher::publish(const StepResult& r, double rate) {
   s.rigid_alignment = to_transform(a);
   // A refusal or an event is told in the next status only: later ones say how the model is.
   const std::string fresh = session_.notices().take_fresh(&s.rejected_inputs);
-  s.text = r.message.empty() ? fresh : fresh.empty() ? r.message : r.message + "; " + fresh;
+  s.text = r.message;
+  for (const std::string& part : {fresh, waiting.empty() ? "" : "waiting for tf, out of the scene: " + waiting})
+    if (!part.empty()) s.text += (s.text.empty() ? "" : "; ") + part;
   // Stamped and published under the heartbeat's lock: it never sends an older step after a newer
   // one, nor an earlier stamp after a later one.
   std::lock_guard<std::mutex> lock(status_mutex_);

@@ -24,11 +24,16 @@
 #include <vector>
 
 #include "liver_sim/simulation/liver_model.h"
+#include "package_files.h"
 #include "tool_io.h"
 
 namespace {
 
 using namespace liver_sim;
+
+// The contact cases' scenes, found beside the tool at run time (package_files.h).
+constexpr const char* kProbeScene = "config/scenes/probe_cube.yaml";
+constexpr const char* kTubeScene = "config/scenes/aspiration_tube.yaml";
 
 // Outcomes: "converged", or the reason a step was rolled back, the start of its message
 // ("stalled", "residual blow-up", "energy growth", ...).
@@ -224,7 +229,7 @@ InstrumentOptions instrument(const std::string& name, InstrumentOptions::Type ty
 void contact_cases(std::vector<Case>& v) {
   using Type = InstrumentOptions::Type;
   using V3 = Eigen::Vector3d;
-  const std::string cube = LIVER_SIM_PROBE_SCENE;
+  const std::string cube = tool::package_file(kProbeScene);
   const std::vector<std::string> dynamic = {"solver.mode=dynamic", "solver.dt=0.001", "solver.tolerance=1e-6"};
   auto add = [&](const std::string& name, std::vector<InstrumentOptions> instruments, int steps, bool quick,
                  std::vector<std::string> overrides = {}) {
@@ -296,7 +301,7 @@ void failure_cases(std::vector<Case>& v) {
                                                            "a negative pivot")}) {
     for (const auto& [name, o] : instruments) {
       Case c{"failure", name + " pressing, " + what + " in frame 5", dynamic, {}, {}, 5, name == "probe"};
-      c.scene = LIVER_SIM_PROBE_SCENE;
+      c.scene = tool::package_file(kProbeScene);
       c.instruments = {o};
       c.expected = {reason};
       c.fault = fault;
@@ -314,7 +319,7 @@ void failure_cases(std::vector<Case>& v) {
              m.update_instrument(0, tube);
            },
            5, true};
-    c.scene = LIVER_SIM_TUBE_SCENE;
+    c.scene = tool::package_file(kTubeScene);
     c.expected = {reason};
     c.fault = fault;
     c.fault_step = 5;
@@ -370,7 +375,7 @@ std::vector<Case> cases() {
 int main(int argc, char** argv) {
   namespace tool = liver_sim::tool;
   bool quick = false;
-  std::string scene = LIVER_SIM_ASPIRATION_SCENE, csv, group;
+  std::string scene = tool::package_file("config/scenes/aspiration_cube.yaml"), csv, group;
   std::vector<std::string> extra;  // --set K=V, after each case's own overrides
   const std::vector<Case> all = cases();
   std::vector<std::string> groups;

@@ -64,6 +64,7 @@ class InstrumentSlots {
     std::string name;
     int index = -1;
     std::string frame;
+    bool waiting = false;  // driven by a frame that has given no pose yet: out of the scene
   };
   std::vector<Slot> slots() const;
 

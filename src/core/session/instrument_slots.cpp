@@ -345,7 +345,7 @@ std::vector<InstrumentSlots::Slot> InstrumentSlots::slots() const {
   std::lock_guard<std::mutex> lock(mutex_);
   std::vector<Slot> v;
   for (const auto& [name, t] : tracked_)
-    if (!t.removed) v.push_back({name, t.index, t.frame});
+    if (!t.removed) v.push_back({name, t.index, t.frame, !t.frame.empty() && !t.pose});
   return v;
 }
 
