@@ -18,7 +18,10 @@ FramePacing::Clock::duration FramePacing::period(double hz) const {
 }
 
 bool FramePacing::until_next_frame(const WaitForInput& wait_for_input) {
-  const bool input = wait_for_input(last_start_ + period(rate_));
+  // After a frame an input started, the tick waits half a period longer: a stream of inputs at
+  // about ~rate then never finds the thread busy with a tick's frame that started just before.
+  const Clock::duration tick = last_input_start_ == last_start_ ? period(rate_) * 3 / 2 : period(rate_);
+  const bool input = wait_for_input(last_start_ + tick);
   if (input) std::this_thread::sleep_until(last_input_start_ + period(rate_));
   last_start_ = Clock::now();
   if (input) last_input_start_ = last_start_;
