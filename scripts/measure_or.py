@@ -3,7 +3,9 @@
 tumour, pressing 2-6 mm into the liver while it sweeps 1 cm to and fro, optionally with a depth
 camera's clouds, and reports meshes per second while the probe moves and the pose-to-mesh latency
 (a mesh marker carries the stamp of the newest input it reflects; a pose's latency is the time from
-its stamp to the first mesh that shows it or a later pose).
+its stamp to the first mesh that shows it or a later pose). A mesh's arrival is taken from its raw
+bytes: decoding a marker of the phantom's surface in Python takes longer than the node's frame, and
+would be measured as latency.
 
 usage: scripts/measure_or.py [--duration S] [--clouds HZ] [--json FILE]
        (with ROS_MASTER_URI of the node's master; scripts/measure_or.sh starts a node and runs it)
@@ -12,6 +14,7 @@ import argparse
 import json
 import math
 import os
+import struct
 import sys
 import time
 
@@ -20,7 +23,6 @@ import rospy
 from sensor_msgs import point_cloud2
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
-from visualization_msgs.msg import Marker
 
 sys.path.insert(0, os.path.dirname(os.path.realpath(__file__)))
 from or_demo import FRAME, Camera, Instrument, Session, surface_height  # noqa: E402
@@ -45,6 +47,12 @@ def input_latencies(sent, meshes):
     return arrival[first[shown]] - sent[shown] * 1e-9
 
 
+def raw_stamp(message):
+    """The header stamp (ns) of a serialised message that starts with a std_msgs/Header."""
+    _, secs, nsecs = struct.unpack_from("<III", message._buff)
+    return secs * 1_000_000_000 + nsecs
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--duration", type=float, default=20.0, help="seconds the probe moves (default 20)")
@@ -55,8 +63,6 @@ def main():
     rng = np.random.default_rng(1)
     session = Session()
     meshes = []  # (arrival time (s), stamp (ns)) of every mesh marker
-    rospy.Subscriber("/liver_sim/mesh", Marker, lambda m: meshes.append((time.time(), m.header.stamp.to_nsec())),
-                     queue_size=50)
     deadline = time.time() + 120
     while time.time() < deadline:
         with session.lock:
@@ -70,6 +76,9 @@ def main():
     with session.lock:
         tumour = session.targets[0].copy()
     triangles = session.triangles()
+    session.mesh_subscriber.unregister()  # the surface is known: no more markers decoded here
+    rospy.Subscriber("/liver_sim/mesh", rospy.AnyMsg, lambda m: meshes.append((time.time(), raw_stamp(m))),
+                     queue_size=50)
     surface = surface_height(triangles, tumour[:2])
     camera = Camera(triangles, rng) if args.clouds > 0 else None
     cloud_pub = rospy.Publisher("/points", PointCloud2, queue_size=1)

@@ -154,7 +154,7 @@ class Session:
         self.sent = set()        # stamps (ns) of the poses and clouds sent
         self.latencies = []      # s, an input's stamp -> the first mesh marker that reflects it
         self.seen = set()
-        rospy.Subscriber(f"{NODE}/mesh", Marker, self.on_mesh, queue_size=5)
+        self.mesh_subscriber = rospy.Subscriber(f"{NODE}/mesh", Marker, self.on_mesh, queue_size=5)
         rospy.Subscriber(f"{NODE}/status", SimulationStatus, self.on_status, queue_size=50)
         rospy.Subscriber(f"{NODE}/target_poses", PoseArray, self.on_targets, queue_size=5)
 

@@ -116,14 +116,14 @@ NodeOptions read_node_options(const ros::NodeHandle& pnh, const std::string& def
   pnh.param("thread_slice", o.thread_slice, o.thread_slice);
   if (const std::string error = options_error(o); !error.empty()) throw std::invalid_argument(error);
   // The node steps in real-time frames by default: modified Newton on a reused factor (contacts
-  // carried in the same solve), two iterations a frame, a step that has not converged
-  // continuing in the next frame, a cloud's correspondence updates one a frame;
+  // carried in the same solve) refreshed in the background, two iterations a frame, a step that
+  // has not converged continuing in the next frame, a cloud's correspondence updates one a frame;
   // ~solver/strategy, ~solver/max_iterations and ~registration/frame_updates change that.
   std::ostringstream budget;
   budget.precision(17);
   budget << "solver.time_budget=" << o.step_time_budget;
-  o.scene_overrides = {"solver.strategy=modified_newton", "solver.max_iterations=2", budget.str(),
-                       "registration.frame_updates=1"};
+  o.scene_overrides = {"solver.strategy=modified_newton", "solver.max_iterations=2", "solver.background_refresh=true",
+                       budget.str(), "registration.frame_updates=1"};
   for (const char* section : {"parenchyma", "capsule", "solver", "contact", "registration"}) {
     XmlRpc::XmlRpcValue values;
     if (!pnh.getParam(section, values)) continue;
