@@ -1,5 +1,7 @@
 #include "liver_sim/scene/scene.h"
 
+#include "scene_overrides.h"
+
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -424,39 +426,6 @@ class Reader {
   std::string origin_;
 };
 
-// Sets the scalar at `path` (dotted; numbers index sequences), creating missing map keys.
-void apply_override(YAML::Node node, const std::vector<std::string>& path, size_t i, const std::string& value,
-                    const Reader& reader, const std::string& text) {
-  const std::string& key = path[i];
-  const bool last = i + 1 == path.size();
-  if (node.IsSequence()) {
-    size_t index = 0;
-    try {
-      size_t used = 0;
-      index = std::stoul(key, &used);
-      if (used != key.size()) throw std::invalid_argument(key);
-    } catch (const std::exception&) {
-      reader.fail("--set " + text, "'" + key + "' is not a list index");
-    }
-    if (index >= node.size()) reader.fail("--set " + text, "index " + key + " out of range");
-    YAML::Node child = node[index];
-    if (!last) return apply_override(child, path, i + 1, value, reader, text);
-    if (child.IsMap() || child.IsSequence()) reader.fail("--set " + text, "only scalars can be overridden");
-    node[index] = value;
-    return;
-  }
-  if (!node.IsMap() && !node.IsNull()) reader.fail("--set " + text, "the path runs through a scalar");
-  const YAML::Node existing = static_cast<const YAML::Node&>(node)[key];
-  if (last) {
-    if (existing && (existing.IsMap() || existing.IsSequence()))
-      reader.fail("--set " + text, "only scalars can be overridden");
-    node[key] = value;
-    return;
-  }
-  if (!existing || existing.IsNull()) node[key] = YAML::Node(YAML::NodeType::Map);
-  apply_override(node[key], path, i + 1, value, reader, text);
-}
-
 }  // namespace
 
 Scene parse_scene(const std::string& yaml, const std::string& base_dir, const std::string& origin,
@@ -476,17 +445,7 @@ Scene parse_scene(const std::string& yaml, const std::string& base_dir, const st
     reader.fail("", std::string("YAML syntax: ") + e.what());
   }
   if (!root.IsDefined() || root.IsNull()) reader.fail("", "empty scene");
-  for (const std::string& text : overrides) {
-    const size_t eq = text.find('=');
-    if (eq == std::string::npos || eq == 0) reader.fail("--set " + text, "expected dotted.key=value");
-    std::vector<std::string> path;
-    std::stringstream keys(text.substr(0, eq));
-    for (std::string part; std::getline(keys, part, '.');) {
-      if (part.empty()) reader.fail("--set " + text, "empty key component");
-      path.push_back(part);
-    }
-    apply_override(root, path, 0, text.substr(eq + 1), reader, text);
-  }
+  apply_overrides(root, overrides, origin);
   try {
     return reader.scene(root, base_dir);
   } catch (const YAML::Exception& e) {
