@@ -45,20 +45,6 @@ std::string vec(const Eigen::Vector3d& v) {
   return s.str();
 }
 
-// Seconds since the last call.
-class Stopwatch {
- public:
-  double lap() {
-    const auto now = std::chrono::steady_clock::now();
-    const double s = std::chrono::duration<double>(now - last_).count();
-    last_ = now;
-    return s;
-  }
-
- private:
-  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
-};
-
 int run(const Options& o) {
   auto say = [&](const std::string& s) {
     if (!o.quiet) std::cerr << "make_model: " << s << "\n";

@@ -14,19 +14,6 @@ namespace {
 // livers: 2-5); a segmentation's stair-steps into dozens or hundreds (3D-IRCADb's: 46).
 constexpr int kMaxPatches = 20;
 
-class Stopwatch {
- public:
-  double lap() {
-    const auto now = std::chrono::steady_clock::now();
-    const double s = std::chrono::duration<double>(now - last_).count();
-    last_ = now;
-    return s;
-  }
-
- private:
-  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
-};
-
 int resolve_label(const std::string& text, const LabelImage& image, const std::string& origin) {
   char* end = nullptr;
   const long v = std::strtol(text.c_str(), &end, 10);

@@ -5,6 +5,7 @@
 // angle and the element count.
 #pragma once
 
+#include <chrono>
 #include <functional>
 #include <string>
 #include <utility>
@@ -20,6 +21,20 @@
 #include "make_model_options.h"
 
 namespace liver_sim {
+
+// The phases' wall time: seconds since the last lap.
+class Stopwatch {
+ public:
+  double lap() {
+    const auto now = std::chrono::steady_clock::now();
+    const double s = std::chrono::duration<double>(now - last_).count();
+    last_ = now;
+    return s;
+  }
+
+ private:
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
 
 struct ModelMesh {
   std::string input_name;          // the --surface or --label-map file

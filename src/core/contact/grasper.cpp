@@ -45,15 +45,18 @@ class Grasper final : public InstrumentShape {
 
   // Jaws of twice the hold radius, tilted apart by 25 degrees when open, on a rod.
   void draw(const InstrumentOptions& o, const Eigen::Isometry3d& pose, std::vector<InstrumentPart>& parts) const override {
+    // Two jaws four hold radii long and wider than the rod, hinged at its end and centred on
+    // the tip (the hold point), tilted 25 degrees apart when open: a viewer sees a grasper, not
+    // a rod.
     const double r = o.radius, tilt = o.closed ? 0.0 : 25.0 * M_PI / 180.0;
     for (int side : {-1, 1}) {
-      const Eigen::Isometry3d jaw = pose * Eigen::Translation3d(0, 0, r) *
+      const Eigen::Isometry3d jaw = pose * Eigen::Translation3d(0, 0, 2 * r) *
                                     Eigen::AngleAxisd(side * tilt, Eigen::Vector3d::UnitY()) *
-                                    Eigen::Translation3d(side * 0.25 * r, 0, -r);
+                                    Eigen::Translation3d(side * 0.3 * r, 0, -2 * r);
       parts.push_back(
-          part(InstrumentPart::Primitive::Box, jaw, Eigen::Vector3d(0.3 * r, 0.8 * r, 2 * r), InstrumentPart::Role::Jaw));
+          part(InstrumentPart::Primitive::Box, jaw, Eigen::Vector3d(0.4 * r, 1.4 * r, 4 * r), InstrumentPart::Role::Jaw));
     }
-    parts.push_back(part(InstrumentPart::Primitive::Cylinder, pose * Eigen::Translation3d(0, 0, r + 0.5 * o.length),
+    parts.push_back(part(InstrumentPart::Primitive::Cylinder, pose * Eigen::Translation3d(0, 0, 2 * r + 0.5 * o.length),
                          Eigen::Vector3d(0.8 * r, 0.8 * r, o.length), InstrumentPart::Role::Body));
   }
 

@@ -1,4 +1,5 @@
 #include "liver_sim/meshing/surface_repair.h"
+#include "point_text.h"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -10,13 +11,6 @@
 
 namespace liver_sim {
 namespace {
-
-std::string at(const Eigen::Vector3d& p) {
-  std::ostringstream s;
-  s.precision(6);
-  s << "(" << p[0] << ", " << p[1] << ", " << p[2] << ")";
-  return s.str();
-}
 
 std::string number(double x) {
   std::ostringstream s;

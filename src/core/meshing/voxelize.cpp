@@ -6,16 +6,10 @@
 #include <sstream>
 
 #include "liver_sim/meshing/voxel_mask.h"
+#include "point_text.h"
 
 namespace liver_sim {
 namespace {
-
-std::string at(const Eigen::Vector3d& p) {
-  std::ostringstream s;
-  s.precision(6);
-  s << "(" << p[0] << ", " << p[1] << ", " << p[2] << ")";
-  return s.str();
-}
 
 // A ray along axis d meets a triangle at a depth, entering (+1: the triangle faces against the
 // ray) or leaving (-1).
