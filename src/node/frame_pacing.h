@@ -4,7 +4,8 @@
 // latest of each input wins). Without input a frame starts one period of ~rate after the last one (one and
 // a half after one an input started): a step still converging goes on, tf-driven instruments
 // are read, stale ones noticed. The mesh
-// goes out after the frames that moved it, at most ~publish_rate a second on average.
+// goes out after the frames that moved it when a publishing slot is due, at most ~publish_rate a
+// second (any frame takes a due slot, one that sends nothing too).
 #pragma once
 
 #include <chrono>

@@ -90,8 +90,8 @@ class TrackingSession {
   void refuse(const std::string& why) { notices_.refuse(why); }
 
   // --- Simulation thread.
-  // Until an input is submitted (true; at once when one was since the last advance()) or the
-  // deadline (false).
+  // Until an input is submitted (true; at once when one was since the last advance() took the
+  // inputs) or the deadline (false).
   bool wait_for_input(InputSignal::Clock::time_point deadline) { return input_.wait_until(deadline); }
   FrameReport advance();
   // A fault met outside advance() (publishing): counted, and the state says so.

@@ -43,7 +43,6 @@ class Grasper final : public InstrumentShape {
     in.closed = closed;
   }
 
-  // Jaws of twice the hold radius, tilted apart by 25 degrees when open, on a rod.
   void draw(const InstrumentOptions& o, const Eigen::Isometry3d& pose, std::vector<InstrumentPart>& parts) const override {
     // Two jaws four hold radii long and wider than the rod, hinged at its end and centred on
     // the tip (the hold point), tilted 25 degrees apart when open: a viewer sees a grasper, not
