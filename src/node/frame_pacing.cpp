@@ -7,11 +7,17 @@ namespace liver_sim {
 
 FramePacing::FramePacing(double rate, double publish_rate)
     : rate_(rate), publish_rate_(publish_rate), last_start_(Clock::now()), last_input_start_(last_start_),
-      input_due_(last_start_), next_publish_(last_start_) {}
+      input_due_(last_start_), mesh_due_(last_start_),
+      next_idle_status_(last_start_) {}
 
 void FramePacing::set_rates(double rate, double publish_rate) {
   rate_ = rate;
   publish_rate_ = publish_rate;
+  // What was due at the old rates is due at most a period of the new ones from now.
+  const Clock::time_point now = Clock::now();
+  input_due_ = std::min(input_due_, now + period(rate_));
+  mesh_due_ = std::min(mesh_due_, now + period(publish_rate_));
+  next_idle_status_ = std::min(next_idle_status_, now + period(publish_rate_));
 }
 
 FramePacing::Clock::duration FramePacing::period(double hz) const {
@@ -34,11 +40,14 @@ bool FramePacing::until_next_frame(const WaitForInput& wait_for_input) {
   return input;
 }
 
-bool FramePacing::publish_due() {
+bool FramePacing::mesh_due() const { return Clock::now() >= mesh_due_ - period(publish_rate_) / 2; }
+
+void FramePacing::mesh_sent() { mesh_due_ = std::max(mesh_due_, Clock::now()) + period(publish_rate_); }
+
+bool FramePacing::idle_status_due() {
   const Clock::time_point now = Clock::now();
-  if (now < next_publish_) return false;
-  next_publish_ += period(publish_rate_);
-  if (next_publish_ < now) next_publish_ = now + period(publish_rate_);  // fell behind: no burst
+  if (now < next_idle_status_) return false;
+  next_idle_status_ = now + period(publish_rate_);
   return true;
 }
 

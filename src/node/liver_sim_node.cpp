@@ -134,10 +134,8 @@ void LiverSimNode::frame() {
     status_->note_step();
     publish_status(report.step);
   }
-  if (pacing_.publish_due()) {
-    scene_->publish();
-    if (!report.converging) publish_status(session_->last_step());
-  }
+  if (pacing_.mesh_due() && scene_->publish()) pacing_.mesh_sent();
+  if (!report.converging && pacing_.idle_status_due()) publish_status(session_->last_step());
   status_->update_diagnostics();
 }
 

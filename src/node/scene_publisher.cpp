@@ -33,7 +33,7 @@ void ScenePublisher::note(const FrameReport& report) {
   display_due_ |= report.analysis.adopted;
 }
 
-void ScenePublisher::publish() {
+bool ScenePublisher::publish() {
   const LiverModel& model = session_.model();
   // Displacements from the pre-operative equilibrium: the first converged state after start or
   // reset; taking it recolours the mesh.
@@ -42,7 +42,7 @@ void ScenePublisher::publish() {
     display_due_ = true;
   }
   if (!display_due_ && published_positions_.size() == model.positions().size() && published_positions_ == model.positions())
-    return;
+    return false;
   published_positions_ = model.positions();
   display_due_ = false;
   marker_.header.frame_id = frame_id_;
@@ -59,6 +59,7 @@ void ScenePublisher::publish() {
     fill_vessel_marker(model, vessel_marker_);
     vessel_pub_.publish(vessel_marker_);
   }
+  return true;
 }
 
 // The tumour probes and vessel bifurcations where the model has them now: spheres (tumour red,

@@ -24,7 +24,8 @@ class ScenePublisher {
   // What a frame did that changes the display: a reset (the displacements' reference is taken
   // anew), an analysis adopted (new covariances).
   void note(const FrameReport& report);
-  void publish();
+  // Sends what changed since the last time; false when nothing had.
+  bool publish();
 
  private:
   void publish_targets(const std_msgs::Header& header);
