@@ -26,7 +26,8 @@ build() {  # target sources... [libraries]
 build fuzz_mesh "$REPO/test/fuzz/fuzz_mesh.cpp" "$REPO/src/core/geometry/mesh.cpp" "$REPO/src/core/io/mesh_io.cpp"
 build fuzz_vessel "$REPO/test/fuzz/fuzz_vessel.cpp" "$REPO/src/core/geometry/vessel_tree.cpp" "$REPO/src/core/io/vessel_io.cpp" "$REPO/src/core/io/vtk_polydata.cpp" \
   -lyaml-cpp
-build fuzz_scene "$REPO/test/fuzz/fuzz_scene.cpp" "$REPO/src/core/scene/scene.cpp" "$REPO/src/core/scene/options.cpp" \
+build fuzz_scene "$REPO/test/fuzz/fuzz_scene.cpp" "$REPO/src/core/scene/scene.cpp" "$REPO/src/core/scene/scene_overrides.cpp" \
+  "$REPO/src/core/scene/options.cpp" \
   "$REPO/src/core/geometry/region.cpp" -lyaml-cpp
 build fuzz_surface "$REPO/test/fuzz/fuzz_surface.cpp" "$REPO/src/core/io/surface_io.cpp" "$REPO/src/core/io/vtk_polydata.cpp" \
   "$REPO/src/core/meshing/surface_repair.cpp"
