@@ -1,6 +1,6 @@
 // When the node's frames start and when it publishes, in one place. A frame starts as soon as
 // an input arrives (a pose, a cloud, a command), so that a pose's latency is the frame's
-// compute, but input frames at most ~rate a second on average (a faster stream is sampled: the
+// compute, but frames at most ~rate a second on average (a faster stream is sampled: the
 // latest of each input wins). Without input a frame starts one period of ~rate after the last one (one and
 // a half after one an input started): a step still converging goes on, tf-driven instruments
 // are read, stale ones noticed. The mesh
@@ -35,7 +35,7 @@ class FramePacing {
   Clock::duration period(double hz) const;
   double rate_, publish_rate_;
   Clock::time_point last_start_, last_input_start_;
-  Clock::time_point input_due_;  // when the next input frame is due at the rate
+  Clock::time_point frame_due_;  // when the next frame is due at the rate
   Clock::time_point mesh_due_, next_idle_status_;
 };
 

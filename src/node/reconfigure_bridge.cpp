@@ -72,6 +72,7 @@ bool ReconfigureBridge::on_set(dynamic_reconfigure::Reconfigure::Request& req,
     std::lock_guard<std::mutex> lock(mutex_);
     pending_ = c;
   }
+  session_.wake();
   c.__toMessage__(res.config);
   return true;
 }

@@ -200,6 +200,7 @@ TEST(TrackingSession, AnInputWakesTheFrameWaitUntilTheFrameTakesIt) {
         CapsuleOptions c;
         ASSERT_EQ(session.submit(CapsuleEdit{true, 0, 0, 0}, c), "");
       },
+      [&] { session.wake(); },  // the node's reconfigure request, held by the node
   };
   for (size_t i = 0; i < inputs.size(); ++i) {
     inputs[i]();

@@ -86,6 +86,9 @@ class TrackingSession {
   // A capsule change, validated now and applied at the next frame; `capsule`: the capsule the
   // model will have (the one in force or pending, when refused). Returns "" or the refusal.
   std::string submit(const CapsuleEdit& edit, CapsuleOptions& capsule);
+  // An input the caller holds until the frame's start (the node's reconfigure request): the
+  // frame wait is woken as by a submitted one.
+  void wake() { input_.notify(); }
   // A refusal met outside the session (a message that could not be converted).
   void refuse(const std::string& why) { notices_.refuse(why); }
 

@@ -12,6 +12,9 @@ RegistrationAnalysis::RegistrationAnalysis(LiverModel& model, const Scene& scene
   if (placement == Placement::Background) {
     Scene own = scene;
     own.solver.threads = 1;  // see UncertaintyWorker
+    // The worker is itself the background: its model factorises on the worker's thread, and a
+    // refresh thread of its own would sit idle.
+    own.solver.background_refresh = false;
     worker_ = std::make_unique<UncertaintyWorker>(std::make_unique<LiverModel>(load_scene_mesh(own), own),
                                                   scene.registration.uncertainty);
   } else {
