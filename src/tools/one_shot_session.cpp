@@ -9,6 +9,7 @@
 #include "liver_sim/registration/target_uncertainty.h"
 
 namespace liver_sim {
+namespace {
 
 void set_one_shot_option(OneShotOptions& o, const std::string& assignment) {
   const size_t eq = assignment.find('=');
@@ -36,6 +37,28 @@ void set_one_shot_option(OneShotOptions& o, const std::string& assignment) {
   } else {
     throw std::invalid_argument("no one-shot option " + key);
   }
+}
+
+}  // namespace
+
+void set_one_shot_options(OneShotOptions& options, const std::vector<std::string>& assignments) {
+  for (const std::string& a : assignments) set_one_shot_option(options, a);
+  const std::string error = validate(options);
+  if (!error.empty()) throw std::invalid_argument(error);
+}
+
+void add_one_shot_sets(CLI::App& app, OneShotOptions* options, const std::string& keys) {
+  const auto set = [options](const std::vector<std::string>& assignments) {
+    try {
+      set_one_shot_options(*options, assignments);
+    } catch (const std::invalid_argument& e) {
+      throw CLI::ValidationError("--set", e.what());
+    }
+  };
+  app.add_option_function<std::vector<std::string>>(
+         "--set", set, "a one-shot option in SI units (registration/one_shot.h: " + keys + ", ...; repeatable)")
+      ->option_text("KEY=VALUE")
+      ->allow_extra_args(false);
 }
 
 OneShotSession::OneShotSession(const Scene& scene, const OneShotOptions& options) {

@@ -8,6 +8,7 @@
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 
+#include <CLI/CLI.hpp>
 #include <Eigen/Core>
 #include <memory>
 #include <optional>
@@ -21,10 +22,15 @@
 
 namespace liver_sim {
 
-// Sets the one-shot option named by `assignment` ("KEY=VALUE", SI units; the fields of
-// OneShotOptions). Throws std::invalid_argument for an unknown key or a value that is not a
-// number (whole for the counts); the bounds are validate()'s.
-void set_one_shot_option(OneShotOptions& options, const std::string& assignment);
+// Sets the one-shot options named by `assignments` ("KEY=VALUE" each, SI units; the fields of
+// OneShotOptions) and checks the result against validate()'s bounds. Throws
+// std::invalid_argument for an unknown key, a value that is not a number (whole for the counts)
+// or a value beyond its bound.
+void set_one_shot_options(OneShotOptions& options, const std::vector<std::string>& assignments);
+
+// The one-shot tools' --set KEY=VALUE (repeatable) into `options` (set_one_shot_options); a
+// refusal is a bad command line naming it. `keys` names a few of the options for the help.
+void add_one_shot_sets(CLI::App& app, OneShotOptions* options, const std::string& keys);
 
 class OneShotSession {
  public:

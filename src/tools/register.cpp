@@ -167,21 +167,11 @@ std::optional<int> parse(int argc, char** argv, Options* o) {
   app.add_option("--spacing", spacing, "surface input: mean distance between its samples, > 0 (--unit; default 1 mm)")
       ->option_text("D")
       ->check(tool::positive());
-  std::vector<std::string> sets;
-  app.add_option("--set", sets, "a one-shot option in SI units (registration/one_shot.h: start_gate,\nload_damping, foundation, ...; repeatable)")
-      ->option_text("KEY=VALUE")
-      ->allow_extra_args(false);
+  add_one_shot_sets(app, &o->one_shot, "start_gate,\nload_damping, foundation");
   app.callback([&] {
     o->scale = unit == "mm" ? 1e-3 : unit == "cm" ? 1e-2 : 1.0;
     o->spacing = app.count("--spacing") ? spacing * o->scale : 1e-3;
     if (!viewpoint.empty()) o->viewpoint = o->scale * Eigen::Vector3d(viewpoint[0], viewpoint[1], viewpoint[2]);
-    try {
-      for (const std::string& s : sets) set_one_shot_option(o->one_shot, s);
-    } catch (const std::invalid_argument& e) {
-      throw CLI::ValidationError("--set", e.what());
-    }
-    const std::string error = validate(o->one_shot);
-    if (!error.empty()) throw CLI::ValidationError("--set", error);
   });
   return tool::parse(app, argc, argv);
 }

@@ -35,7 +35,7 @@ using namespace liver_sim;
 
 struct Options {
   std::string scene, data, csv, targets_csv;
-  std::vector<std::string> views, sets;
+  std::vector<std::string> views;
   std::vector<double> coverages{0.2, 0.3, 0.44};
   bool stylus = false, quiet = false;
   double noise = 1e-3, spacing = 1e-3;
@@ -82,21 +82,12 @@ std::optional<int> parse(int argc, char** argv, Options* o) {
   app.add_option("--repeats", o->repeats, "clouds per view with other noise, >= 1 (default 1)")
       ->option_text("R")
       ->check(tool::at_least(1));
-  app.add_option("--set", o->sets, "a one-shot option in SI units (registration/one_shot.h: voxel_size,\nstart_gate, load_damping, ...; repeatable)")
-      ->option_text("KEY=VALUE")
-      ->allow_extra_args(false);
+  add_one_shot_sets(app, &o->one_shot, "voxel_size,\nstart_gate, load_damping");
   app.add_option("--csv", o->csv, "one row per input and repeat (default: standard output)")->option_text("FILE");
   app.add_option("--targets-csv", o->targets_csv, "every target's error and covariance terms")->option_text("FILE");
   app.add_flag("--quiet", o->quiet, "no progress on standard error");
   app.callback([&] {
     o->stylus = sensor == "stylus";
-    try {
-      for (const std::string& s : o->sets) set_one_shot_option(o->one_shot, s);
-    } catch (const std::invalid_argument& e) {
-      throw CLI::ValidationError("--set", e.what());
-    }
-    const std::string error = validate(o->one_shot);
-    if (!error.empty()) throw CLI::ValidationError("--set", error);
   });
   return tool::parse(app, argc, argv);
 }

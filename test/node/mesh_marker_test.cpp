@@ -6,7 +6,7 @@
 #include <map>
 #include <set>
 
-#include "../src/node/mesh_marker.h"
+#include "mesh_marker.h"
 #include "liver_sim/geometry/mesh.h"
 #include "regions.h"
 

@@ -1,8 +1,5 @@
-// Threads of the model's loops (worker_pool.h, solver.threads): every chunk of a loop runs once
-// and before run() returns, a pool has as many threads at work at once as it was given, a model
-// starts the threads its scene asks for and runs chunks on them, and its results are the same to
-// the last bit for any thread count; memory the process frees is reused without the system
-// faulting it in again. No timing is asserted.
+// The model on its threads: the counts its scene asks for, the same bits for any count, the
+// scheduling slices, freed memory reused.
 #include <gtest/gtest.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
@@ -17,16 +14,10 @@
 
 #include "liver_sim/simulation/liver_model.h"
 #include "liver_sim/runtime/worker_pool.h"
+#include "runtime/process_threads.h"
 
 namespace liver_sim {
 namespace {
-
-// Threads of this process, as the kernel lists them.
-int process_threads() {
-  int n = 0;
-  for ([[maybe_unused]] const auto& entry : std::filesystem::directory_iterator("/proc/self/task")) ++n;
-  return n;
-}
 
 std::string scene_path(const std::string& name) {
   return std::string(LIVER_SIM_SOURCE_DIR) + "/config/scenes/" + name;
@@ -34,54 +25,6 @@ std::string scene_path(const std::string& name) {
 
 bool same_bits(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), sizeof(double) * a.size()) == 0;
-}
-
-// Seen to fail with run() returning before the helpers' chunks finish (the wait after the
-// caller's own chunks removed), and with a claim that lets the counter pass the last chunk.
-TEST(WorkerPool, RunsEveryChunkOnceBeforeReturning) {
-  for (int threads : {1, 2, 3, 8}) {
-    WorkerPool pool(threads);
-    for (int chunks : {0, 1, 2, 7, 300}) {
-      std::vector<std::atomic<int>> runs(chunks + 1);  // one past the end: no chunk may run there
-      pool.run(chunks, [&](int c) {
-        if (c % 50 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(2));  // some chunks outlast others
-        ++runs[std::min(c, chunks)];
-      });
-      for (int c = 0; c <= chunks; ++c)
-        ASSERT_EQ(runs[c].load(), c < chunks ? 1 : 0) << threads << " threads, chunk " << c << " of " << chunks;
-    }
-  }
-}
-
-// All threads of the pool inside one loop at the same time: each chunk waits until as many
-// threads as the pool has have entered. A pool that ignored its thread count would leave the
-// first chunk waiting alone: a 30 s limit turns that into a failure instead of a hang (it bounds
-// the test, it measures nothing). Seen to fail with the helpers not started.
-TEST(WorkerPool, HasAsManyThreadsAtWorkAsItWasGiven) {
-  for (int threads : {2, 3, 4}) {
-    WorkerPool pool(threads);
-    std::atomic<int> inside{0}, saw_all{0};
-    pool.run(threads, [&](int) {
-      ++inside;
-      const auto limit = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-      while (inside.load() < threads && std::chrono::steady_clock::now() < limit) std::this_thread::yield();
-      if (inside.load() == threads) ++saw_all;
-    });
-    EXPECT_EQ(saw_all.load(), threads) << threads << " threads";
-    EXPECT_EQ(pool.helper_chunks(), threads - 1);
-  }
-}
-
-TEST(WorkerPool, StartsItsHelpersAndEndsThem) {
-  const int before = process_threads();
-  {
-    WorkerPool pool(4);
-    EXPECT_EQ(pool.threads(), 4);
-    EXPECT_EQ(process_threads(), before + 3);
-  }
-  EXPECT_EQ(process_threads(), before);
-  EXPECT_THROW(WorkerPool(0), std::invalid_argument);
-  EXPECT_THROW(WorkerPool(WorkerPool::kMaxThreads + 1), std::invalid_argument);
 }
 
 TEST(Threads, OutOfRangeCountsAreRefusedNamingTheKey) {

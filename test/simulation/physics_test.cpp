@@ -14,6 +14,7 @@
 #include "liver_sim/model/corotational_beam.h"
 #include "liver_sim/simulation/liver_model.h"
 #include "regions.h"
+#include "simulation/scenes.h"
 
 namespace liver_sim {
 namespace {
@@ -290,7 +291,7 @@ TEST(NewtonMatrix, NewtonKrylovSolvesALinearDynamicStepInTwoIterations) {
 
 // Each detector, triggered by an input that honestly leads there: the step is rolled back to
 // the exact state before it, every observable value to the last bit (velocities, rotations and
-// their warm starts included: test_robustness.cpp covers the instruments), and says which
+// their warm starts included: simulation/rollback_test.cpp covers the instruments), and says which
 // detector fired.
 StepResult expect_rolled_back(LiverModel& m, const std::string& reason) {
   const std::vector<double> before = m.observable_state();
@@ -301,13 +302,6 @@ StepResult expect_rolled_back(LiverModel& m, const std::string& reason) {
   EXPECT_TRUE(same_bits(m.observable_state(), before));
   EXPECT_EQ(m.time(), time);
   return r;
-}
-
-// The aspiration cube on 4 x 4 x 4 hexahedra (320 tetrahedra).
-Scene aspiration_cube() {
-  Scene s = load_scene(std::string(LIVER_SIM_SOURCE_DIR) + "/config/scenes/aspiration_cube.yaml");
-  s.mesh.box_divisions = Eigen::Vector3i(4, 4, 4);
-  return s;
 }
 
 // A load that is not a number (a corrupted pressure reading): caught at the residual, before a

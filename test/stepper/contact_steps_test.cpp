@@ -1,0 +1,183 @@
+// Steps with a probe in contact: dynamic presses settle on the static equilibrium, and a factor
+// serves the iterations after the one that made it.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <thread>
+
+#include "liver_sim/geometry/closest_points.h"
+#include "liver_sim/contact/contact_solver.h"
+#include "liver_sim/simulation/liver_model.h"
+#include "regions.h"
+#include "contact/block_scenes.h"
+
+namespace liver_sim {
+namespace {
+
+// A probe (4 mm) lowered 2 mm onto a 20 mm block and pressed 1.5 mm into it within `press_time`
+// (s), then held: dynamic steps of 10 ms, mass-proportional damping.
+constexpr double kBlock = 0.02;
+Scene dynamic_press(double press_time) {
+  const double r = 0.004;
+  Scene s = block_scene(3000, 0.45, 0.3);
+  InstrumentOptions p = probe("probe", Eigen::Vector3d::Zero(), r);
+  const Eigen::Vector3d end(kBlock / 2, kBlock / 2, kBlock + r - 0.0015);
+  for (double t : {0.0, press_time}) {
+    InstrumentOptions::Keyframe f;
+    f.t = t;
+    f.position = end + Eigen::Vector3d(0, 0, t == 0 ? 0.002 : 0.0);
+    p.trajectory.push_back(f);
+  }
+  s.instruments.push_back(p);
+  s.solver.mode = SolverOptions::Mode::Dynamic;
+  s.solver.dt = 0.01;
+  s.solver.rayleigh_mass = 20;
+  return s;
+}
+
+// The probe's reaction at the static equilibrium at the end of the press.
+double static_press_reaction(const Scene& dynamic) {
+  Scene st = dynamic;
+  st.solver.mode = SolverOptions::Mode::Static;
+  st.solver.strategy = SolverOptions::Strategy::NewtonKrylov;
+  st.solver.max_iterations = 60;
+  st.solver.background_refresh = false;
+  st.solver.dt = 1.0;  // the trajectory's end at the first step
+  LiverModel reference(make_box_mesh({kBlock, kBlock, kBlock}, {6, 6, 6}), st);
+  const StepResult r = reference.step();
+  EXPECT_TRUE(r.converged()) << r.message;
+  return reference.instrument_reaction(0).force.z();
+}
+
+// Dynamics: a probe pressing along a trajectory converges at every step and ends at rest on
+// the same equilibrium as the static solve.
+TEST(Probe, DynamicPressSettlesOnTheStaticEquilibrium) {
+  const Scene s = dynamic_press(0.1);
+  LiverModel dyn(make_box_mesh({kBlock, kBlock, kBlock}, {6, 6, 6}), s);
+  for (int k = 0; k < 150; ++k) {
+    const StepResult res = dyn.step();
+    ASSERT_TRUE(res.converged()) << "step " << k << ": " << res.message;
+  }
+  const double reference = static_press_reaction(s);
+  EXPECT_NEAR(dyn.instrument_reaction(0).force.z(), reference, 0.01 * reference);
+}
+
+// The node's frames: modified Newton, two iterations a step, its refreshes factorised in the
+// background while the steps go on with the old factor (a short pause after each step gives the
+// thread the time a real-time frame leaves). The press must settle where the static equilibrium
+// is, the steps taking up factors from the thread. Checked to fail when the contraction rule
+// asks for no background refresh, and when the refresh is never started (none taken up). A
+// taken factor not counted as new (the contact's compliance cache then stays the old factor's)
+// survives: the iterations correct the stale operator, and the press settles all the same.
+TEST(Probe, BackgroundRefreshSettlesOnTheStaticEquilibrium) {
+  Scene s = dynamic_press(0.3);
+  s.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
+  s.solver.max_iterations = 2;
+  s.solver.background_refresh = true;
+  LiverModel dyn(make_box_mesh({kBlock, kBlock, kBlock}, {6, 6, 6}), s);
+  int taken = 0;
+  for (int k = 0; k < 200; ++k) {
+    const StepResult res = dyn.step();
+    ASSERT_NE(res.status, StepResult::Status::Diverged) << "step " << k << ": " << res.message;
+    taken += res.background_factorizations;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  EXPECT_GT(taken, 0) << "no refresh came from the background";
+  const double reference = static_press_reaction(s);
+  EXPECT_NEAR(dyn.instrument_reaction(0).force.z(), reference, 0.01 * reference);
+}
+
+// Modified Newton judges its factor by the residual each iteration was asked to zero. A probe
+// hovering within the alarm distance puts surface points into the contact problem without
+// loading them: the iterations, and so the factor refreshes, must be those of the same run
+// without it. Kills the contraction judged against the residual after the iteration (every
+// other iteration then refreshes the factor: 14 factorisations in 30 steps against 1).
+TEST(Probe, HoveringProbeKeepsModifiedNewtonsFactor) {
+  const double L = 0.02;
+  Scene s = block_scene(30000, 0.45, 0.0);
+  s.loads.push_back(LoadOptions::gravity({0, 0, -9.81}));  // sags the top ~0.1 mm: never reaches the probe
+  s.solver.mode = SolverOptions::Mode::Dynamic;
+  s.solver.dt = 0.01;
+  s.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
+  s.solver.max_iterations = 1;
+  s.solver.tolerance = 1e-14;  // every step takes its one iteration
+  LiverModel free(make_box_mesh({L, L, L}, {6, 6, 6}), s);
+  LiverModel hovered(make_box_mesh({L, L, L}, {6, 6, 6}), s);
+  const double gap = 0.3e-3;  // m, inside the alarm distance (0.5 mm)
+  ASSERT_LT(gap, hovered.contact().options().alarm_distance);
+  hovered.add_instrument(probe("probe", {L / 2, L / 2, L + 0.003 + gap}, 0.003));
+  int free_factorizations = 0, hovered_factorizations = 0;
+  bool candidates = false;
+  for (int k = 0; k < 30; ++k) {
+    const StepResult a = free.step(), b = hovered.step();
+    ASSERT_NE(a.status, StepResult::Status::Diverged) << a.message;
+    ASSERT_NE(b.status, StepResult::Status::Diverged) << b.message;
+    free_factorizations += a.factorizations;
+    hovered_factorizations += b.factorizations;
+    candidates |= hovered.contact().active();
+    ASSERT_EQ(b.contacts, 0) << "step " << k << ": the probe must not touch";
+  }
+  ASSERT_TRUE(candidates) << "the probe never came within the alarm distance";
+  EXPECT_EQ(hovered_factorizations, free_factorizations);
+  EXPECT_LE((hovered.positions() - free.positions()).cwiseAbs().maxCoeff(), 1e-9 * L);
+}
+
+// Modified Newton judges a factor by the iterations after the one that made it: that one's
+// contraction measures how far from linear the contacts make the problem, which a newer factor
+// meets as well. A probe sweeping 12 mm across the block, one iteration a step: no step
+// refactorises right after one that factorised (none finds no descent here, which would), and
+// the steps track converged dynamics as closely as full Newton's, which refactorises in every
+// iteration (0.452 against 0.455 of the peak motion). Kills the rule judging the fresh factor
+// too (16 factorisations, 6 of them right after another, against 9 and none; the same error).
+TEST(Probe, AFactorServesTheIterationAfterTheOneThatMadeIt) {
+  const double r = 0.002, depth = 0.001, speed = 0.02;  // m, m, m/s
+  Scene s = block_scene(3000, 0.45, 0.3);
+  InstrumentOptions p = probe("probe", Eigen::Vector3d::Zero(), r);
+  for (double t : {0.0, 0.1, 0.1 + 0.012 / speed}) {  // lowered 2 mm, then swept along x
+    InstrumentOptions::Keyframe f;
+    f.t = t;
+    f.position = Eigen::Vector3d(t <= 0.1 ? 0.004 : 0.016, kBlock / 2, kBlock + r - (t == 0 ? -0.001 : depth));
+    p.trajectory.push_back(f);
+  }
+  s.instruments.push_back(p);
+  s.solver.mode = SolverOptions::Mode::Dynamic;
+  s.solver.dt = 0.01;
+  s.solver.rayleigh_mass = 20;
+  Scene converged = s, modified = s, full = s;
+  converged.solver.strategy = SolverOptions::Strategy::NewtonKrylov;
+  converged.solver.tolerance = 1e-8;
+  converged.solver.max_iterations = 100;
+  modified.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
+  full.solver.strategy = SolverOptions::Strategy::FullNewton;
+  for (Scene* one : {&modified, &full}) {
+    one->solver.max_iterations = 1;
+    one->solver.tolerance = 1e-14;  // every step takes its one iteration
+  }
+  const TetMesh block = make_box_mesh({kBlock, kBlock, kBlock}, {6, 6, 6});
+  LiverModel reference(block, converged), kept(block, modified), refreshed(block, full);
+  int factorizations = 0, right_after = 0, contacts = 0;
+  bool factorized_before = false;
+  double kept_error = 0, refreshed_error = 0;
+  for (int k = 0; k < 80; ++k) {
+    const StepResult c = reference.step(), m = kept.step(), f = refreshed.step();
+    ASSERT_TRUE(c.converged()) << "step " << k << ": " << c.message;
+    ASSERT_NE(m.status, StepResult::Status::Diverged) << "step " << k << ": " << m.message;
+    ASSERT_NE(f.status, StepResult::Status::Diverged) << "step " << k << ": " << f.message;
+    factorizations += m.factorizations;
+    if (m.factorizations > 0 && factorized_before) ++right_after;
+    factorized_before = m.factorizations > 0;
+    contacts += c.contacts;
+    kept_error = std::max(kept_error, (kept.positions() - reference.positions()).cwiseAbs().maxCoeff());
+    refreshed_error = std::max(refreshed_error, (refreshed.positions() - reference.positions()).cwiseAbs().maxCoeff());
+  }
+  ASSERT_GT(contacts, 0) << "the probe never touched the block";
+  ASSERT_GT(factorizations, 1) << "the sweep never asked for a new factor";
+  EXPECT_EQ(right_after, 0);
+  EXPECT_LE(kept_error, 1.01 * refreshed_error);
+}
+
+}  // namespace
+}  // namespace liver_sim
