@@ -33,6 +33,10 @@ def main():
     if not os.access(args.register_insilico, os.X_OK):
         ap.error(args.register_insilico + " is not there: build the workspace first (scripts/run.sh or scripts/test.sh), or give --register-insilico")
     cases = args.case.split(",")
+    sys.path.insert(0, os.path.join(REPO, "scripts"))
+    from make_neohookean_truth import CASES
+    if any(c not in CASES for c in cases):
+        ap.error("--case: each of " + ", ".join(CASES))
     missing = [c for c in cases if not os.path.exists(os.path.join(args.out, c, "oracle.txt"))]
     if missing:
         subprocess.run([sys.executable, os.path.join(REPO, "scripts", "make_neohookean_truth.py"), "--out", args.out,
