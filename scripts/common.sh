@@ -17,7 +17,7 @@ PACKAGES=(
   libeigen3-dev libsuitesparse-dev libopenblas0-pthread libyaml-cpp-dev
   libgtest-dev python3-rostest librostest-dev python3-roslaunch python3-rosmaster rosout
   python3-rospy python3-rosbag python3-geometry-msgs python3-sensor-msgs python3-std-srvs
-  python3-visualization-msgs python3-diagnostic-msgs python3-matplotlib python3-numpy clang libclang-rt-14-dev
+  python3-visualization-msgs python3-diagnostic-msgs python3-matplotlib python3-numpy python3-scipy clang libclang-rt-14-dev
   python3-gmsh libgmsh-dev stress-ng
   libvtk9-dev zlib1g-dev   # make_model: re-surfacing (VTK), compressed label maps (zlib)
   # The scripts' and tests' Python: catkin's module (package_paths.py), YAML, tf and clock messages.
