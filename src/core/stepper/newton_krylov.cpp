@@ -24,8 +24,10 @@ class NewtonKrylov final : public UpdateStrategy {
     const Gmres::Operator preconditioner = [this](const Eigen::VectorXd& in, Eigen::VectorXd& out) {
       parts_.factor.solver().solve(in, out);
     };
-    const int krylov = gmres_.solve(it.jacobian, preconditioner, it.r, dx, it.forcing, kMaxKrylov, it.deadline);
-    judge_preconditioner(krylov, gmres_.relative_residual(), it.forcing, gmres_.out_of_time());
+    // Without contacts the solve runs to its tolerance: cut at one iteration a frame, the
+    // aspiration cube's follower load did not reach its equilibrium in 400 frames.
+    const int krylov = gmres_.solve(it.jacobian, preconditioner, it.r, dx, it.forcing, kMaxKrylov);
+    judge_preconditioner(krylov, gmres_.relative_residual(), it.forcing, false);
     return krylov;
   }
 
