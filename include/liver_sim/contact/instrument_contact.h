@@ -102,13 +102,15 @@ class InstrumentContact {
   struct Update {
     int krylov = 0;                // GMRES iterations
     double relative_residual = 0;  // GMRES's at the end
+    bool out_of_time = false;      // GMRES stopped at the deadline short of its tolerance
     int sweeps = 0;                // Gauss-Seidel sweeps
   };
   // The contact problem is solved until its gaps carry a force error below force_tolerance (N),
   // and to 1% of options().tolerance at least.
   Update direct_update(CholmodSolver& factor, const Eigen::VectorXd& r, double force_tolerance, Eigen::VectorXd& dx);
+  // GMRES stops at the deadline with its iterate so far (Gmres::solve).
   Update krylov_update(CholmodSolver& factor, const Gmres::Operator& jacobian, const Eigen::VectorXd& r, double forcing,
-                       double force_tolerance, Eigen::VectorXd& dx);
+                       double force_tolerance, Gmres::Clock::time_point deadline, Eigen::VectorXd& dx);
   // The forces of the last update scaled along the step, l_before + alpha (l_update - l_before):
   // a line search's trial point alpha dx carries alpha of the force change (0: the update undone).
   void scale_update(double alpha);

@@ -22,11 +22,13 @@ namespace liver_sim {
 class KrylovContactUpdate {
  public:
   // dx for the residual r (the free forces plus the contacts' current forces), with the problem
-  // built and solved for r; sets the contacts' forces. Returns the GMRES iterations.
+  // built and solved for r; sets the contacts' forces. Returns the GMRES iterations; GMRES stops
+  // at the deadline with its iterate so far (Gmres::solve), forces and motion together.
   int solve(std::vector<SurfaceContact>& contacts, ContactProblem& problem, const MechanicalModel& mechanics,
             double friction, CholmodSolver& factor, const Gmres::Operator& jacobian, const Eigen::VectorXd& r,
-            double forcing, Eigen::VectorXd& dx);
+            double forcing, Gmres::Clock::time_point deadline, Eigen::VectorXd& dx);
   double relative_residual() const { return gmres_.relative_residual(); }  // GMRES's at the end
+  bool out_of_time() const { return gmres_.out_of_time(); }  // GMRES stopped at the deadline
 
  private:
   struct Unknown {  // one force unknown

@@ -32,14 +32,16 @@ InstrumentContact::Update InstrumentContact::direct_update(CholmodSolver& factor
 
 InstrumentContact::Update InstrumentContact::krylov_update(CholmodSolver& factor, const Gmres::Operator& jacobian,
                                                            const Eigen::VectorXd& r, double forcing, double force_tolerance,
-                                                           Eigen::VectorXd& dx) {
+                                                           Gmres::Clock::time_point deadline, Eigen::VectorXd& dx) {
   Update update;
   // 1. The frictional contact problem with the rows predicted after the tangent's update A^-1 r:
   // which contacts separate, stick or slide. 2. The Newton update for that contact state on the
   // true Jacobian.
   update.sweeps = solve_contact_problem(factor, r, force_tolerance);
-  update.krylov = krylov_.solve(contacts_, problem_, mechanics_, options_.friction, factor, jacobian, r, forcing, dx);
+  update.krylov =
+      krylov_.solve(contacts_, problem_, mechanics_, options_.friction, factor, jacobian, r, forcing, deadline, dx);
   update.relative_residual = krylov_.relative_residual();
+  update.out_of_time = krylov_.out_of_time();
   keep_update();
   return update;
 }

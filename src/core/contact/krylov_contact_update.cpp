@@ -28,7 +28,7 @@ void KrylovContactUpdate::choose_unknowns(const std::vector<SurfaceContact>& con
 int KrylovContactUpdate::solve(std::vector<SurfaceContact>& contacts, ContactProblem& problem,
                                const MechanicalModel& mechanics, double friction, CholmodSolver& factor,
                                const Gmres::Operator& jacobian, const Eigen::VectorXd& r, double forcing,
-                               Eigen::VectorXd& dx) {
+                               Gmres::Clock::time_point deadline, Eigen::VectorXd& dx) {
   choose_unknowns(contacts, problem.lambda(), friction);
   const int k = static_cast<int>(unknowns_.size());
   const std::vector<char>& fixed = mechanics.fixed_dofs();
@@ -87,7 +87,8 @@ int KrylovContactUpdate::solve(std::vector<SurfaceContact>& contacts, ContactPro
     out.head(dofs) = augmented_out_;
     out.tail(k) = schur_solution_;
   };
-  const int iterations = gmres_.solve(system, preconditioner, augmented_rhs_, augmented_solution_, forcing, kMaxKrylov);
+  const int iterations =
+      gmres_.solve(system, preconditioner, augmented_rhs_, augmented_solution_, forcing, kMaxKrylov, deadline);
   dx = augmented_solution_.head(dofs);
   change_.assign(contacts.size(), Eigen::Vector3d::Zero());
   for (int a = 0; a < k; ++a) change_[unknowns_[a].contact] += unknowns_[a].force * augmented_solution_[dofs + a];

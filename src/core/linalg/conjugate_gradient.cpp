@@ -5,10 +5,11 @@
 namespace liver_sim {
 
 int ConjugateGradient::solve(const Operator& A, const Operator& M_inv, const Eigen::VectorXd& b,
-                             Eigen::VectorXd& x, double tolerance, int max_iterations) {
+                             Eigen::VectorXd& x, double tolerance, int max_iterations, Clock::time_point deadline) {
   x.setZero(b.size());
   const double b_norm = b.norm();
   relative_residual_ = 0;
+  out_of_time_ = false;
   if (b_norm == 0) return 0;
   r_ = b;
   M_inv(r_, z_);
@@ -23,6 +24,10 @@ int ConjugateGradient::solve(const Operator& A, const Operator& M_inv, const Eig
     ++k;
     relative_residual_ = r_.norm() / b_norm;
     if (relative_residual_ <= tolerance || !std::isfinite(relative_residual_)) break;
+    if (Clock::now() > deadline) {
+      out_of_time_ = true;
+      break;
+    }
     M_inv(r_, z_);
     const double rz_next = r_.dot(z_);
     p_ = z_ + (rz_next / rz) * p_;

@@ -6,7 +6,7 @@
 namespace liver_sim {
 
 int Gmres::solve(const Operator& A, const Operator& M_inv, const Eigen::VectorXd& b,
-                 Eigen::VectorXd& x, double tolerance, int max_iterations) {
+                 Eigen::VectorXd& x, double tolerance, int max_iterations, Clock::time_point deadline) {
   const Eigen::Index n = b.size();
   const int m = max_iterations;
   if (V_.rows() != n || V_.cols() < m + 1) {
@@ -20,6 +20,7 @@ int Gmres::solve(const Operator& A, const Operator& M_inv, const Eigen::VectorXd
   x.setZero(n);
   const double beta = b.norm();
   relative_residual_ = 0;
+  out_of_time_ = false;
   if (beta == 0) return 0;
   V_.col(0) = b / beta;
   g_[0] = beta;
@@ -54,6 +55,10 @@ int Gmres::solve(const Operator& A, const Operator& M_inv, const Eigen::VectorXd
     ++k;
     relative_residual_ = std::abs(g_[k]) / beta;
     if (relative_residual_ <= tolerance) break;
+    if (Clock::now() > deadline) {
+      out_of_time_ = true;
+      break;
+    }
   }
   const Eigen::VectorXd y =
       H_.topLeftCorner(k, k).triangularView<Eigen::Upper>().solve(g_.head(k));

@@ -23,7 +23,7 @@ class JacobiCG final : public UpdateStrategy {
       out = jacobi_.cwiseProduct(in);
     };
     // Without a factor it needs many more iterations than the preconditioned solves.
-    return cg_.solve(tangent, jacobi, it.r, dx, it.forcing, 20 * kMaxKrylov * kMaxKrylov);
+    return cg_.solve(tangent, jacobi, it.r, dx, it.forcing, 20 * kMaxKrylov * kMaxKrylov, it.deadline);
   }
 
  private:

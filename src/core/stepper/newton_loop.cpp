@@ -154,7 +154,7 @@ bool NewtonStepper::newton_update(UpdateStrategy& update, Solve& s, bool fresh_f
     const std::vector<char>& fixed = mechanics_.fixed_dofs();
     for (int i = 0; i < out.size(); ++i) out[i] = fixed[i] ? v[i] : (r_[i] - out[i]) / h;
   };
-  result.linear_iterations += update.solve({r_, forcing, force_tolerance, jacobian, result}, dx_);
+  result.linear_iterations += update.solve({r_, forcing, force_tolerance, jacobian, result, deadline_}, dx_);
   result.timing.solve_ms += ms_since(t0);
   if (take_fault(InjectedFault::NonFinite)) dx_[0] = std::numeric_limits<double>::quiet_NaN();
   if (!dx_.allFinite()) {

@@ -20,8 +20,8 @@ class ReusedFactorCG final : public UpdateStrategy {
     const Gmres::Operator preconditioner = [this](const Eigen::VectorXd& in, Eigen::VectorXd& out) {
       parts_.factor.solver().solve(in, out);
     };
-    const int krylov = cg_.solve(tangent, preconditioner, it.r, dx, it.forcing, kMaxKrylov);
-    judge_preconditioner(krylov, cg_.relative_residual(), it.forcing);
+    const int krylov = cg_.solve(tangent, preconditioner, it.r, dx, it.forcing, kMaxKrylov, it.deadline);
+    judge_preconditioner(krylov, cg_.relative_residual(), it.forcing, cg_.out_of_time());
     return krylov;
   }
 

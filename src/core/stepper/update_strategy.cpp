@@ -41,8 +41,9 @@ void UpdateStrategy::begin_iteration(StepResult& result) {
   if (parts_.solver.background_refresh && parts_.factor.valid()) parts_.factor.refresh_in_background(parts_.matrix, result);
 }
 
-void UpdateStrategy::judge_preconditioner(int iterations, double relative_residual, double forcing) {
-  if (iterations > kRefactorAfter || relative_residual > forcing) refresh();
+void UpdateStrategy::judge_preconditioner(int iterations, double relative_residual, double forcing,
+                                          bool out_of_time) {
+  if (iterations > kRefactorAfter || (!out_of_time && relative_residual > forcing)) refresh();
 }
 
 void UpdateStrategy::refresh() {

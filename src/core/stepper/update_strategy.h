@@ -51,6 +51,9 @@ struct NewtonIteration {
   double force_tolerance;            // N: the contact problem's share of the residual the step must reach
   const Gmres::Operator& jacobian;   // products with the true Jacobian (directional differences of the residual)
   StepResult& result;                // the work's counters and times
+  // The step's time budget: an iterative solve stops there with its iterate so far, and the
+  // Newton loop judges the iteration's end as out of time.
+  Gmres::Clock::time_point deadline;
 };
 
 // An accepted iteration, for the strategy to judge its factor by.
@@ -90,8 +93,9 @@ class UpdateStrategy {
   // in the same solve.
   int direct_solve(const NewtonIteration& it, Eigen::VectorXd& dx);
   // A factor that preconditions an iterative solve poorly (many iterations, or the solve not
-  // reaching its tolerance) is refreshed at the next iteration.
-  void judge_preconditioner(int iterations, double relative_residual, double forcing);
+  // reaching its tolerance) is refreshed at the next iteration. A solve stopped at the deadline
+  // is judged by its iterations only: its residual says when it stopped, not how it converged.
+  void judge_preconditioner(int iterations, double relative_residual, double forcing, bool out_of_time);
   // The factor no longer serves well: refactorised in the step, or with background_refresh on
   // a thread of its own while it serves meanwhile.
   void refresh();
