@@ -36,6 +36,7 @@ void log_frame(const FrameReport& r) {
 SessionOptions session_options(const NodeOptions& o) {
   SessionOptions s;
   s.analysis_period = o.uncertainty_period;
+  if (o.one_shot) s.one_shot = OneShotOptions();
   s.test_fault_every = o.test_fault_every;
   s.helper_processors = o.helper_processors;
   // The default instrument `tool` and one per ~instrument_frames: rods with a hemispherical tip

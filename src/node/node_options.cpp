@@ -98,6 +98,7 @@ NodeOptions read_node_options(const ros::NodeHandle& pnh, const std::string& def
   pnh.param("test_fault_every", o.test_fault_every, 0);
   if (!pnh.getParam("threads", o.threads)) o.threads = -1;
   pnh.param("uncertainty_period", o.uncertainty_period, o.uncertainty_period);
+  pnh.param("one_shot", o.one_shot, o.one_shot);
   // Clouds are cropped to the rest shape's box grown by the registration's reach and
   // ~cloud_margin for the liver's own motion.
   pnh.param("cloud_margin", o.cloud_margin, o.cloud_margin);

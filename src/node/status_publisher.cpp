@@ -86,7 +86,8 @@ std_msgs::Header StatusPublisher::publish(const StepResult& r, double rate) {
   // A refusal or an event is told in the next status only: later ones say how the model is.
   const std::string fresh = session_.notices().take_fresh(&s.rejected_inputs);
   s.text = r.message;
-  for (const std::string& part : {fresh, waiting.empty() ? "" : "waiting for tf, out of the scene: " + waiting})
+  const std::string one_shot = session_.one_shot_running() ? "one-shot registration of a cloud running" : "";
+  for (const std::string& part : {fresh, one_shot, waiting.empty() ? "" : "waiting for tf, out of the scene: " + waiting})
     if (!part.empty()) s.text += (s.text.empty() ? "" : "; ") + part;
   // Stamped and published under the heartbeat's lock: it never sends an older step after a newer
   // one, nor an earlier stamp after a later one.

@@ -1,8 +1,8 @@
 // One cloud registered in one shot: the one-shot registration (registration/one_shot.h) handed
 // over to the tracker (SurfaceRegistration::register_one_shot, the call a tracking session makes
 // for its first cloud), then the targets read from the tracked model. Shared by the register and
-// register_insilico tools. The node's TrackingSession (session/tracking_session.h) does not make
-// that call yet: when it does, these tools are to compose it instead.
+// register_insilico tools. The node's TrackingSession (session/tracking_session.h) makes the
+// same hand-over (adopt_one_shot) with the solve on a thread of its own (one_shot_worker.h).
 #pragma once
 
 #include <pcl/point_cloud.h>

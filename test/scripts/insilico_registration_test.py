@@ -55,23 +55,25 @@ class InsilicoRegistration(unittest.TestCase):
                 self.assertLess(r["tre_mean_mm"], 0.5 * r["rigid_mean_mm"])
 
     def test_calibration_over_depth_bands(self):
-        # The ellipsoids must not be too small (a surgeon trusts them): at least 85% of the
-        # targets inside their 95% ellipsoid in every depth band, the d2 median at most 3.3 (the
-        # target, 2.37 within 25%, widened for one noise draw per view whose 3,803 targets'
-        # errors are correlated). Mutations seen failing: the model-form term's damping part
-        # dropped (bias = 0 in OneShotRegistration::uncertainty): xz's d2 median 3.46, yz's
-        # shallow band 83% inside (a narrow margin); the loads never applied (as above): 18%
-        # inside. Not asserted: the upper side of the target (at most 98% inside, d2 median at
-        # least 1.8): on the wide held-out views the ellipsoids are too large (99% inside, d2
-        # median 1.1-1.2 with make_model's meshes of this case; doc/registration.md).
+        # Against the truth's interior nodes on the held-out views: the lower side of the target
+        # (at least 90% inside the 95% ellipsoid in every depth band, the d2 median at most 2.96)
+        # and the upper side as far as it holds (at most 98.5% inside over all, the d2 median at
+        # least 1.15; the target's 98% and 1.78 are missed on these views: the ellipsoids are
+        # still too large there, doc/registration.md). Mutations seen failing: the model-form
+        # term's displacement part dropped (displacement_error 0): yz's shallow band 89.4%
+        # inside; the posterior's scale 1 instead of 1.5: yz's shallow band 87.5%; the loads'
+        # prior over every patch instead of those the cloud determines, at the earlier scale 2:
+        # xz 99.0% inside, d2 median 1.05.
         for view in ("xz", "yz"):
             r = self.rows[view]
             for band in ("all", "shallow", "middle", "deep"):
                 with self.subTest(view=view, band=band):
                     self.assertGreater(r[band + "_targets"], 100)
-                    self.assertGreaterEqual(r[band + "_inside_95"], 0.85)
+                    self.assertGreaterEqual(r[band + "_inside_95"], 0.90)
             with self.subTest(view=view):
-                self.assertLessEqual(r["all_d2_median"], 3.3)
+                self.assertLessEqual(r["all_inside_95"], 0.985)
+                self.assertGreaterEqual(r["all_d2_median"], 1.15)
+                self.assertLessEqual(r["all_d2_median"], 2.96)
 
 
 if __name__ == "__main__":

@@ -64,10 +64,11 @@ struct OneShotOptions {
   int rounds = 2;                  // in [1, 20]: linearisations
   int iterations = 6;              // in [1, 100]: correspondence updates per round
   // The targets' uncertainty (OneShotRegistration::uncertainty); chosen on the in-silico case's
-  // views xy and xz-hemi, the widest and the narrowest (doc/registration.md).
-  double posterior_scale = 2.0;    // -, >= 0: on the fit's posterior standard deviations
-  double damping_error = 1.0;      // -, >= 0: the model's error per axis over a point's motion per unit log of the damping
-  double model_error_floor = 1e-4; // m, >= 0: and an error of this much everywhere
+  // views xy and xz-hemi (doc/registration.md).
+  double posterior_scale = 1.5;    // -, >= 0: on the fit's posterior standard deviations
+  double damping_error = 0.0;      // -, >= 0: the model's error per axis over a point's motion per unit log of the damping
+  double displacement_error = 0.03;  // -, in [0, 1]: the model's error per axis over the point's displacement
+  double model_error_floor = 5e-5; // m, >= 0: and an error of this much everywhere
 };
 // Empty when valid, else a message naming the field at fault ("one_shot.<field>").
 std::string validate(const OneShotOptions& o);
@@ -106,13 +107,13 @@ class OneShotRegistration {
   // covariance (m^2, the cloud's frame) of its registered position, the sum of
   //   - the fit's own uncertainty, linearised: the loads and the rigid motion have the posterior
   //     of the damped least squares read as Bayesian (the points' residuals independent, of the
-  //     variance their weighted residuals show, the loads a priori independent, of the mean
-  //     square of the fitted ones), propagated through the last round's B and the embedding, times
-  //     posterior_scale squared;
+  //     variance their weighted residuals show, the loads a priori independent, of the fitted
+  //     ones' square sum over the number of loads the cloud determines), propagated through the
+  //     last round's B and the embedding, times posterior_scale squared;
   //   - the model's form (the material, the foundation, the loads' shapes are guesses, and the
   //     damping pulls the loads towards zero where the cloud says little): isotropic, of
   //     variance model_error_floor^2 + (damping_error x the point's motion per unit log of the
-  //     damping)^2.
+  //     damping)^2 + (displacement_error x the point's displacement)^2.
   // The point's registered position rides with it (`positions`, cloud frame).
   struct PointUncertainty {
     Eigen::Vector3d position;    // m, cloud frame

@@ -92,6 +92,11 @@ class SurfaceRegistration {
   };
   OneShotReport register_one_shot(OneShotRegistration& one_shot, const pcl::PointCloud<pcl::PointXYZ>& cloud,
                                   const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
+  // The hand-over alone, of a one-shot result found elsewhere (another thread, from the
+  // alignment in force when it started) for `cloud`: what register_one_shot does after the
+  // solve. Throws std::invalid_argument, with nothing changed, for a result of another mesh.
+  RegistrationFrame adopt_one_shot(const OneShotResult& result, const pcl::PointCloud<pcl::PointXYZ>& cloud,
+                                   const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
 
   // The last cloud's next correspondence updates (up to options.frame_updates of those its
   // register_cloud left, fewer once the scene's solver.time_budget is spent: the first always

@@ -25,6 +25,7 @@
 #include "liver_sim/session/inputs.h"
 #include "liver_sim/session/instrument_slots.h"
 #include "liver_sim/session/notices.h"
+#include "liver_sim/session/one_shot_worker.h"
 #include "liver_sim/session/registration_analysis.h"
 #include "liver_sim/simulation/liver_model.h"
 #include "liver_sim/simulation/step_guard.h"
@@ -49,6 +50,13 @@ struct SessionOptions {
   // Processors of the background work (factor refreshes, analyses); empty: the simulation
   // thread's. A refusal is told (Notices) and leaves them there.
   std::vector<int> helper_processors;
+  // One-shot registration (one_shot.h), on a thread of its own while the frames go on, of the
+  // first cloud after the start or a reset, and of the cloud after one whose registration
+  // accepted less than one_shot_below_inliers of its points or was refused (the organ far from
+  // the model); the clouds that come meanwhile wait, the latest one registered once it is
+  // adopted. None: every cloud to the tracker alone.
+  std::optional<OneShotOptions> one_shot;
+  double one_shot_below_inliers = 0.5;  // -, in [0, 1]
   // The frames' clocks, read where a frame needs them (staleness, the analysis's period and stamp).
   std::function<FrameTime()> clock = [] { return FrameTime(); };
 };
@@ -68,6 +76,9 @@ struct FrameReport {
   std::string capsule_error;     // a capsule change the model refused at last (the one before kept)
   enum class Live { None, Applied, Refused } live = Live::None;  // a LiveOptions change
   std::string fault;             // a fault met applying the inputs
+  // The one-shot registration: started on this frame's cloud, adopted in this frame (`cloud`
+  // is its hand-over's registration), or refused (told as a refusal).
+  enum class OneShot { None, Started, Adopted, Refused } one_shot = OneShot::None;
 };
 
 class TrackingSession {
@@ -106,6 +117,7 @@ class TrackingSession {
   const SurfaceRegistration& registration() const { return *registration_; }
   const RegistrationFrame& registered() const { return registered_; }  // the fit shown: the last cloud's or refinement's
   uint64_t clouds_registered() const { return clouds_registered_; }
+  bool one_shot_running() const { return one_shot_ && one_shot_->running(); }  // any thread
   const std::vector<TargetUncertainty::Covariance>& covariances() const { return analysis_.covariances(); }
   Stamp analysis_stamp() const { return analysis_.stamp(); }
   double analysis_cpu_time() const { return analysis_.cpu_time(); }
@@ -127,8 +139,12 @@ class TrackingSession {
   // All of it or nothing: none when refused, else whether the model changed.
   std::optional<bool> apply_live(const LiveOptions& live);
   void apply_reset(const Reset& reset);
-  // Registers the latest cloud, if one came since the last call.
-  std::optional<RegistrationFrame> register_pending_cloud();
+  // Registers the latest cloud, if one came since the last call (or starts its one-shot
+  // registration, or leaves it for after the one running).
+  std::optional<RegistrationFrame> register_pending_cloud(FrameReport& report);
+  // A one-shot registration done handed to the registration.
+  std::optional<RegistrationFrame> adopt_one_shot(FrameReport& report);
+  void count_registered(const RegistrationFrame& f, Stamp stamp);
   // The step that follows the inputs, behind the barrier, and the analysis after it.
   void simulate(FrameReport& report);
   void start_analysis(FrameReport& report);
@@ -139,6 +155,7 @@ class TrackingSession {
   std::unique_ptr<SurfaceRegistration> registration_;
   RegistrationAnalysis analysis_;
   InstrumentSlots slots_;
+  std::unique_ptr<OneShotWorker> one_shot_;
   StepGuard guard_;
   double pose_timeout_;  // s, as the instruments have it
   bool hold_stale_;
@@ -151,6 +168,7 @@ class TrackingSession {
   Stamp reflected_stamp_ = 0;
   uint64_t clouds_registered_ = 0;
   bool registering_ = false;       // the model is converging on the last cloud
+  bool one_shot_wanted_ = false;   // the next cloud is registered in one shot
   RegistrationFrame registered_;
 
   // Shared with the submitting threads, under mutex_.

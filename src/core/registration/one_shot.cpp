@@ -65,7 +65,8 @@ std::string validate(const OneShotOptions& o) {
       check(o.iterations >= 1 && o.iterations <= 100, "iterations", "in [1, 100]", o.iterations),
       check(o.posterior_scale >= 0 && std::isfinite(o.posterior_scale), "posterior_scale", ">= 0", o.posterior_scale),
       check(o.damping_error >= 0 && std::isfinite(o.damping_error), "damping_error", ">= 0", o.damping_error),
-      check(o.model_error_floor >= 0 && std::isfinite(o.model_error_floor), "model_error_floor", ">= 0 m", o.model_error_floor)};
+      check(o.model_error_floor >= 0 && std::isfinite(o.model_error_floor), "model_error_floor", ">= 0 m", o.model_error_floor),
+      check(o.displacement_error >= 0 && o.displacement_error <= 1, "displacement_error", "in [0, 1]", o.displacement_error)};
   for (const std::string& e : errors)
     if (!e.empty()) return e;
   return "";
@@ -327,8 +328,17 @@ std::vector<OneShotRegistration::PointUncertainty> OneShotRegistration::uncertai
   std::vector<PointUncertainty> out;
   if (basis_.size() == 0 || normal_.size() == 0) return out;
   const int m = static_cast<int>(basis_.cols());
-  // The loads' prior: independent, of the variance the fitted ones show (empirical Bayes).
-  const double prior_variance = std::max(loads_.squaredNorm() / m, 1e-300);
+  Eigen::MatrixXd damped = normal_;
+  damped.topLeftCorner(m, m).diagonal().array() += damping_;
+  const Eigen::LDLT<Eigen::MatrixXd> damped_ldlt(damped);
+  // The loads' prior: independent, of the variance the fitted ones show (empirical Bayes), over
+  // the loads the cloud determines (the effective number of parameters, m - lambda tr((N +
+  // lambda)^-1) on the loads): the patches out of view keep loads near zero by the damping and
+  // say nothing of the loads' size, so dividing by every patch would shrink the prior the more,
+  // the less of the surface is seen.
+  const Eigen::MatrixXd inverse = damped_ldlt.solve(Eigen::MatrixXd::Identity(m + 6, m + 6));
+  const double determined = std::max(m - damping_ * inverse.topLeftCorner(m, m).trace(), 1.0);
+  const double prior_variance = std::max(loads_.squaredNorm() / determined, 1e-300);
   Eigen::MatrixXd information = normal_ / residual_variance_;
   information.topLeftCorner(m, m).diagonal().array() += 1 / prior_variance;
   const Eigen::MatrixXd posterior = options_.posterior_scale * options_.posterior_scale *
@@ -339,11 +349,9 @@ std::vector<OneShotRegistration::PointUncertainty> OneShotRegistration::uncertai
   const Eigen::VectorXd& X = model_->mechanics().rest_positions();
   // How the fit moves per unit log of the damping (at its optimum, the gradient zero):
   // dz/d ln lambda = -(N + lambda D)^-1 lambda D z.
-  Eigen::MatrixXd damped = normal_;
-  damped.topLeftCorner(m, m).diagonal().array() += damping_;
   Eigen::VectorXd shift = Eigen::VectorXd::Zero(m + 6);
   shift.head(m) = -damping_ * loads_;
-  shift = damped.ldlt().solve(shift);
+  shift = damped_ldlt.solve(shift);
   Eigen::MatrixXd J(3, m + 6);
   for (const EmbeddedPoint& e : points) {
     PointUncertainty u;
@@ -362,8 +370,9 @@ std::vector<OneShotRegistration::PointUncertainty> OneShotRegistration::uncertai
     const Eigen::MatrixXd seen = back * J;
     u.fit = seen * posterior * seen.transpose();
     u.prior = seen * shift;
-    const double floor = options_.model_error_floor, bias = options_.damping_error * u.prior.norm();
-    u.model = (floor * floor + bias * bias) * Eigen::Matrix3d::Identity();
+    const double floor = options_.model_error_floor, bias = options_.damping_error * u.prior.norm(),
+                 form = options_.displacement_error * u.displacement.norm();
+    u.model = (floor * floor + bias * bias + form * form) * Eigen::Matrix3d::Identity();
     out.push_back(u);
   }
   return out;

@@ -185,8 +185,17 @@ SurfaceRegistration::OneShotReport SurfaceRegistration::register_one_shot(OneSho
     throw std::invalid_argument("the one-shot registration's model has another mesh");
   OneShotReport report;
   report.one_shot = one_shot.solve(cloud, viewpoint, alignment_);
+  report.frame = adopt_one_shot(report.one_shot, cloud, viewpoint);
+  return report;
+}
+
+RegistrationFrame SurfaceRegistration::adopt_one_shot(const OneShotResult& result,
+                                                      const pcl::PointCloud<pcl::PointXYZ>& cloud,
+                                                      const std::optional<Eigen::Vector3d>& viewpoint) {
+  if (result.positions.size() != model_.positions().size() || !result.positions.allFinite())
+    throw std::invalid_argument("the one-shot registration's shape is not the model's");
   clear();
-  const Eigen::VectorXd& x = report.one_shot.positions;
+  const Eigen::VectorXd& x = result.positions;
   model_.set_positions(x);
   Eigen::VectorXd internal, external;
   MechanicalModel& m = model_.mechanics();
@@ -195,11 +204,10 @@ SurfaceRegistration::OneShotReport SurfaceRegistration::register_one_shot(OneSho
   shape_loads_ = internal - model_.load_scale() * external;
   set_model_loads();
   stepped_loads_ = hidden_loads_;
-  alignment_ = report.one_shot.alignment;
+  alignment_ = result.alignment;
   aligned_ = true;
   align_requested_ = false;
-  report.frame = register_cloud(cloud, viewpoint);
-  return report;
+  return register_cloud(cloud, viewpoint);
 }
 
 void SurfaceRegistration::finish(RegistrationFrame& frame, Clock::time_point start) {

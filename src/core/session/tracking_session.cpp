@@ -38,9 +38,16 @@ TrackingSession::TrackingSession(TetMesh mesh, const Scene& scene, SessionOption
       hold_stale_(options_.instruments.hold_stale),
       capsule_(scene.capsule) {
   guard_.set_test_fault_every(options_.test_fault_every);
+  if (options_.one_shot) {
+    if (!(options_.one_shot_below_inliers >= 0 && options_.one_shot_below_inliers <= 1))
+      throw std::invalid_argument("one_shot_below_inliers must be in [0, 1]");
+    one_shot_ = std::make_unique<OneShotWorker>(model_->mesh(), scene, *options_.one_shot);
+    one_shot_wanted_ = true;
+  }
   if (!options_.helper_processors.empty()) {
     std::string refused = model_->stepper().place_background(options_.helper_processors);
     if (refused.empty()) refused = analysis_.place(options_.helper_processors);
+    if (refused.empty() && one_shot_) refused = one_shot_->place(options_.helper_processors);
     if (!refused.empty()) notices_.tell("background work not placed (" + refused + "); it runs beside the frames");
   }
 }
@@ -211,6 +218,10 @@ void TrackingSession::apply_reset(const Reset& reset) {
   }
   slots_.release_all(*model_);
   registering_ = false;
+  if (one_shot_) {
+    one_shot_->cancel();  // it registers the organ before the reset
+    one_shot_wanted_ = true;
+  }
   clouds_registered_ = 0;
   registered_ = RegistrationFrame();
   analysis_.reset();  // an analysis still running describes the state before
@@ -246,10 +257,18 @@ std::optional<bool> TrackingSession::apply_live(const LiveOptions& live) {
          solver.tolerance != solver_before.tolerance || contact.friction != contact_before.friction;
 }
 
-std::optional<RegistrationFrame> TrackingSession::register_pending_cloud() {
+void TrackingSession::count_registered(const RegistrationFrame& f, Stamp stamp) {
+  if (f.step.status == StepResult::Status::Diverged) return;  // rolled back: the state is the last one
+  ++clouds_registered_;
+  registered_ = f;
+  reflected_stamp_ = stamp;
+}
+
+std::optional<RegistrationFrame> TrackingSession::register_pending_cloud(FrameReport& report) {
   std::optional<Cloud> cloud;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    if (one_shot_ && one_shot_->running()) return std::nullopt;  // the latest cloud waits for it
     cloud.swap(pending_cloud_);
     if (cloud && align_requested_) {
       registration_->request_rigid_alignment();
@@ -257,16 +276,40 @@ std::optional<RegistrationFrame> TrackingSession::register_pending_cloud() {
     }
   }
   if (!cloud) return std::nullopt;
+  if (one_shot_wanted_) {
+    one_shot_wanted_ = false;
+    one_shot_->start(std::move(*cloud), registration_->alignment());
+    report.one_shot = FrameReport::OneShot::Started;
+    notices_.tell("one-shot registration of a cloud started");
+    return std::nullopt;
+  }
   try {
     const RegistrationFrame f = registration_->register_cloud(cloud->points, cloud->viewpoint);
-    if (f.step.status != StepResult::Status::Diverged) {  // rolled back: the state is the last one
-      ++clouds_registered_;
-      registered_ = f;
-      reflected_stamp_ = cloud->stamp;
-    }
+    count_registered(f, cloud->stamp);
+    if (one_shot_ && f.inlier_fraction < options_.one_shot_below_inliers) one_shot_wanted_ = true;
     return f;
   } catch (const std::invalid_argument& e) {
     notices_.refuse(std::string("points: ") + e.what());
+    if (one_shot_) one_shot_wanted_ = true;
+    return std::nullopt;
+  }
+}
+
+std::optional<RegistrationFrame> TrackingSession::adopt_one_shot(FrameReport& report) {
+  std::optional<OneShotWorker::Result> done = one_shot_ ? one_shot_->take() : std::nullopt;
+  if (!done) return std::nullopt;
+  try {
+    if (!done->solved) throw std::invalid_argument(done->error);
+    const RegistrationFrame f = registration_->adopt_one_shot(*done->solved, done->cloud.points, done->cloud.viewpoint);
+    count_registered(f, done->cloud.stamp);
+    report.one_shot = FrameReport::OneShot::Adopted;
+    notices_.tell("one-shot registration adopted (" + std::to_string(static_cast<int>(1e3 * done->cpu_time)) +
+                  " ms of processor time)");
+    return f;
+  } catch (const std::invalid_argument& e) {
+    report.one_shot = FrameReport::OneShot::Refused;
+    notices_.refuse(std::string("one-shot registration: ") + e.what());
+    one_shot_wanted_ = true;
     return std::nullopt;
   }
 }
@@ -276,7 +319,8 @@ void TrackingSession::simulate(FrameReport& report) {
   int factorized = 0;  // in this frame's steps (a cloud's: up to three updates, each tried twice)
   const StepResult r = guard_.step(*model_, [&] {
     report.analysis = analysis_.adopt(*registration_);
-    std::optional<RegistrationFrame> registered = register_pending_cloud();
+    std::optional<RegistrationFrame> registered = adopt_one_shot(report);
+    if (!registered) registered = register_pending_cloud(report);
     if (registered) {
       registering_ = true;
       analysis_.due();
