@@ -228,18 +228,8 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  for (int i = 1; i < argc; ++i)
-    if (std::string(argv[i]) == "--help") {
-      std::cout << kMakeModelUsage;
-      return 0;
-    }
   Options options;
-  try {
-    options = parse_args(argc, argv);
-  } catch (const CommandLineError& e) {
-    std::cerr << "make_model: " << e.what() << "\n" << kMakeModelUsage;
-    return 2;
-  }
+  if (const std::optional<int> status = parse_args(argc, argv, &options)) return *status;
   // A watchdog: gmsh has been seen to recurse without end on rare surfaces; the run then ends
   // with a message instead of hanging its caller.
   std::signal(SIGALRM, [](int) {
