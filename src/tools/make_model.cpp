@@ -83,7 +83,7 @@ int run(const Options& o) {
   std::vector<std::string> fixed_comment;
   for (const std::string& landmark : o.landmarks) {
     fixed.push_back(bare_area(surface));
-    fixed_comment.push_back(landmark + ": the most posterior-superior point of the surface, 0.15 x its extent");
+    fixed_comment.push_back(landmark + ": the most posterior-superior point of the surface, 0.25 x its extent");
   }
   for (const Eigen::Vector4d& s : o.spheres) {
     Region r;
@@ -96,7 +96,7 @@ int run(const Options& o) {
   }
   if (fixed.empty()) {
     fixed.push_back(bare_area(surface));
-    fixed_comment.push_back("bare area (default): the most posterior-superior point of the surface, 0.15 x its extent");
+    fixed_comment.push_back("bare area (default): the most posterior-superior point of the surface, 0.25 x its extent");
   }
 
   const double snap = o.snap_tolerance >= 0 ? o.snap_tolerance * o.unit : 1e-3;

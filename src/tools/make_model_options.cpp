@@ -143,7 +143,7 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
   app.add_flag("--largest-shell", o->largest_shell,
                "several disconnected shells: keep the largest (by volume) instead of refusing");
   app.add_option("--fixed", o->landmarks,
-                 "attachment by anatomy (repeatable): bare_area, a sphere of 0.15 times the liver's\n"
+                 "attachment by anatomy (repeatable): bare_area, a sphere of 0.25 times the liver's\n"
                  "largest extent on its most posterior-superior point (the default when neither\n"
                  "--fixed nor --fixed-sphere is given)")
       ->option_text("LANDMARK")
