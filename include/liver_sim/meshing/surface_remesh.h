@@ -22,7 +22,8 @@ struct RemeshOptions {
   double min_size = 1e-3;  // m, > 0: ...unless it is shorter than this
   int iterations = 8;      // rounds of split, collapse, flip and smoothing
   // Vertices the remeshing may make, at most (MeshError past it: splitting that runs away);
-  // 0: the reference's vertices plus 16 A / L^2, A its area, L the shortest size or min_size.
+  // 0: the reference's vertices plus 16 A / L^2 over its triangles, A the area, L the size
+  // there or min_size where that is shorter.
   size_t max_vertices = 0;
 };
 

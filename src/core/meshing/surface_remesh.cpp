@@ -18,13 +18,6 @@ using Tri = std::array<int, 3>;
 // Triangles thinner than this (radians, about 6 degrees) are not made by a collapse or a move.
 constexpr double kThin = 0.1;
 
-double surface_area(const SurfaceMesh& s) {
-  double twice = 0;
-  for (Eigen::Index t = 0; t < s.F.rows(); ++t)
-    twice += (s.V.row(s.F(t, 1)) - s.V.row(s.F(t, 0))).cross(s.V.row(s.F(t, 2)) - s.V.row(s.F(t, 0))).norm();
-  return 0.5 * twice;
-}
-
 Eigen::Vector3d area_normal(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
   return (b - a).cross(c - a);  // twice the area, along the outward normal
 }
@@ -380,11 +373,21 @@ SurfaceMesh remesh_surface(const SurfaceMesh& reference, const std::vector<doubl
     if (!(s > 0) || !std::isfinite(s)) throw MeshError(origin + ": remeshing: sizes must be finite and > 0");
   // Edges of length L tile an area A with about 1.2 A / L^2 vertices (equilateral triangles);
   // collapsed below 0.8 L and split anew, a pass may hold about four times that. Past 16 A / L^2
-  // for the shortest length allowed (and the reference's own vertices) the splitting has run away.
-  const double shortest = std::min(options.min_size, *std::min_element(size.begin(), size.end()));
+  // summed over the reference's triangles (L the size there, or min_size where that is shorter:
+  // bulging edges are split down to it), and the reference's own vertices, the splitting has run
+  // away.
   size_t cap = options.max_vertices;
-  if (cap == 0)
-    cap = static_cast<size_t>(std::min(1e9, reference.V.rows() + 16 * surface_area(reference) / (shortest * shortest)));
+  if (cap == 0) {
+    double need = static_cast<double>(reference.V.rows());
+    for (Eigen::Index t = 0; t < reference.F.rows(); ++t) {
+      const Eigen::RowVector3d a = reference.V.row(reference.F(t, 0)), b = reference.V.row(reference.F(t, 1)),
+                               c = reference.V.row(reference.F(t, 2));
+      const double here = (size[reference.F(t, 0)] + size[reference.F(t, 1)] + size[reference.F(t, 2)]) / 3;
+      const double L = std::min(options.min_size, here);
+      need += 16 * 0.5 * (b - a).cross(c - a).norm() / (L * L);
+    }
+    cap = static_cast<size_t>(std::min(need, 1e9));
+  }
   Remesher r(reference, size, options.deviation, options.min_size, cap, origin);
   r.run(options.iterations);
   return r.result(report);
