@@ -83,7 +83,7 @@ int run(const Options& o) {
   std::vector<std::string> fixed_comment;
   for (const std::string& landmark : o.landmarks) {
     fixed.push_back(bare_area(surface));
-    fixed_comment.push_back(landmark + ": the most posterior-superior point of the surface, 0.15 x its extent");
+    fixed_comment.push_back(landmark + ": the most posterior-superior point of the surface, 0.25 x its extent");
   }
   for (const Eigen::Vector4d& s : o.spheres) {
     Region r;
@@ -96,7 +96,7 @@ int run(const Options& o) {
   }
   if (fixed.empty()) {
     fixed.push_back(bare_area(surface));
-    fixed_comment.push_back("bare area (default): the most posterior-superior point of the surface, 0.15 x its extent");
+    fixed_comment.push_back("bare area (default): the most posterior-superior point of the surface, 0.25 x its extent");
   }
 
   const double snap = o.snap_tolerance >= 0 ? o.snap_tolerance * o.unit : 1e-3;
@@ -228,18 +228,8 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  for (int i = 1; i < argc; ++i)
-    if (std::string(argv[i]) == "--help") {
-      std::cout << kMakeModelUsage;
-      return 0;
-    }
   Options options;
-  try {
-    options = parse_args(argc, argv);
-  } catch (const CommandLineError& e) {
-    std::cerr << "make_model: " << e.what() << "\n" << kMakeModelUsage;
-    return 2;
-  }
+  if (const std::optional<int> status = parse_args(argc, argv, &options)) return *status;
   // A watchdog: gmsh has been seen to recurse without end on rare surfaces; the run then ends
   // with a message instead of hanging its caller.
   std::signal(SIGALRM, [](int) {

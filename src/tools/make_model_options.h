@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -10,8 +11,6 @@
 #include "liver_sim/meshing/anatomy.h"
 
 namespace liver_sim {
-
-extern const char* const kMakeModelUsage;
 
 struct Vessel {
   std::string name, file;
@@ -44,12 +43,15 @@ struct Options {
   double time_limit = 600;  // s
 };
 
+// Thrown past the command line when a setting turns out impossible for the input (e.g. --size
+// for a volume that would need too many tetrahedra): exit status 2, as a refused command line.
 class CommandLineError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
 
-// Throws CommandLineError naming the option at fault.
-Options parse_args(int argc, char** argv);
+// The command line into `o` (CLI11, tool_io.h): the exit status when make_model is to stop here
+// (0 after --help, 2 after a refusal, named on standard error), else nothing: run.
+std::optional<int> parse_args(int argc, char** argv, Options* o);
 
 }  // namespace liver_sim

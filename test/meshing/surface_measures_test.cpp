@@ -114,7 +114,7 @@ TEST(PatientFrames, BareAreaIsPosteriorSuperior) {
   EXPECT_GT(r.center.y(), centroid.y() + 0.03);
   EXPECT_GT(r.center.z(), centroid.z() + 0.02);
   const double extent = (s.V.colwise().maxCoeff() - s.V.colwise().minCoeff()).maxCoeff();
-  EXPECT_NEAR(r.radius, 0.15 * extent, 1e-12);
+  EXPECT_NEAR(r.radius, 0.25 * extent, 1e-12);
   // The phantom's own attachment there (config/scenes/liver_phantom.yaml) is within 5 cm.
   EXPECT_LT((r.center - Eigen::Vector3d(0.0, 0.07, 0.03)).norm(), 0.05);
 }

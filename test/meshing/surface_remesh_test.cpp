@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <string>
 #include <vector>
 
 #include "liver_sim/geometry/mesh_quality.h"
@@ -91,6 +92,30 @@ TEST(SurfaceRemesh, ASphereKeepsItsShapeAtTheSizeAsked) {
   EXPECT_LT(lengths[lengths.size() / 2], 4.0 / 3.0 * size);
   EXPECT_GT(report.min_angle_deg, 20.0);
   EXPECT_NEAR(enclosed_volume(s), 4.0 / 3.0 * M_PI * r * r * r, 0.03 * 4.0 / 3.0 * M_PI * r * r * r);
+}
+
+// Splitting is capped: sizes of 1 mm on a 2 cm sphere need about 6,000 vertices (1.2 A / L^2),
+// so a cap of 3,000 stops the run with an error naming it instead of growing without bound; the
+// default cap (16 A / L^2) lets it finish. Kills: the cap's check dropped (tried: no error), and
+// splitting that runs away (tried: too_long always true: the default cap's error).
+TEST(SurfaceRemesh, RunawaySplittingStopsAtTheVertexCap) {
+  const double r = 0.02, size = 1e-3;
+  const SurfaceMesh reference = sphere(r, 4);  // 2,048 triangles
+  const std::vector<double> sizes(reference.V.rows(), size);
+  RemeshOptions capped;
+  capped.iterations = 1;
+  capped.max_vertices = 3000;
+  try {
+    remesh_surface(reference, sizes, capped, "sphere");
+    ADD_FAILURE() << "no error at the cap";
+  } catch (const MeshError& e) {
+    EXPECT_NE(std::string(e.what()).find("sphere: remeshing stopped at 3000 vertices"), std::string::npos) << e.what();
+  }
+  capped.max_vertices = 0;
+  const SurfaceMesh s = remesh_surface(reference, sizes, capped, "sphere");
+  const double area = 4 * M_PI * r * r;
+  EXPECT_GT(s.V.rows(), 3000);
+  EXPECT_LT(s.V.rows(), 16 * area / (size * size));
 }
 
 // On a sphere of radius R an edge L bulges L^2 / (8 R): the size for a deviation d is at most

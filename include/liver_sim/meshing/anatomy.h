@@ -24,9 +24,10 @@ enum class PatientFrame {
 Eigen::MatrixX3d to_lps(const Eigen::MatrixX3d& V, PatientFrame frame);
 
 // The bare area, where the liver is attached to the diaphragm around the vena cava and not
-// covered by peritoneum: a sphere of radius 0.15 times the liver's largest extent centred on the
+// covered by peritoneum: a sphere of radius 0.25 times the liver's largest extent centred on the
 // surface's most posterior-superior point (largest y + z in LPS). A default to check against the
-// images: the segmentation does not show the diaphragm.
+// images: the segmentation does not show the diaphragm. Its size: large enough that a 2 L liver
+// hangs from it under gravity in `simulate` without swinging about it (doc/patient_model.md).
 Region bare_area(const SurfaceMesh& surface_lps);
 
 }  // namespace liver_sim

@@ -21,6 +21,10 @@ struct RemeshOptions {
   double deviation = 0.5e-3;
   double min_size = 1e-3;  // m, > 0: ...unless it is shorter than this
   int iterations = 8;      // rounds of split, collapse, flip and smoothing
+  // Vertices the remeshing may make, at most (MeshError past it: splitting that runs away);
+  // 0: the reference's vertices plus 16 A / L^2 over its triangles, A the area, L the size
+  // there or min_size where that is shorter.
+  size_t max_vertices = 0;
 };
 
 struct RemeshReport {
@@ -31,7 +35,8 @@ struct RemeshReport {
 // `reference`: closed, manifold, outward-oriented (repair_surface's output). `size`: the target
 // edge length at each reference vertex (> 0), interpolated linearly across the triangles.
 // Returns a closed, manifold, outward-oriented surface whose vertices lie on the reference.
-// Throws MeshError naming `origin` when the sizes do not fit the reference.
+// Throws MeshError naming `origin` when the sizes do not fit the reference or the vertices
+// exceed max_vertices.
 SurfaceMesh remesh_surface(const SurfaceMesh& reference, const std::vector<double>& size, const RemeshOptions& options,
                            const std::string& origin, RemeshReport* report = nullptr);
 

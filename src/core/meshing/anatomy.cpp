@@ -14,7 +14,7 @@ Region bare_area(const SurfaceMesh& surface) {
   Region r;
   r.kind = Region::Kind::Sphere;
   r.center = surface.V.row(top).transpose();
-  r.radius = 0.15 * (surface.V.colwise().maxCoeff() - surface.V.colwise().minCoeff()).maxCoeff();
+  r.radius = 0.25 * (surface.V.colwise().maxCoeff() - surface.V.colwise().minCoeff()).maxCoeff();
   return r;
 }
 

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <functional>
 #include <queue>
+#include <string>
 
 #include "liver_sim/geometry/surface_locator.h"
 
@@ -45,8 +46,10 @@ bool acceptable(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen:
 // around it. Every vertex lies on the reference; `size` is the target there.
 class Remesher {
  public:
-  Remesher(const SurfaceMesh& reference, const std::vector<double>& size, double deviation, double min_length)
-      : ref_(reference), ref_size_(size), deviation_(deviation), min_length_(min_length) {
+  Remesher(const SurfaceMesh& reference, const std::vector<double>& size, double deviation, double min_length,
+           size_t max_vertices, const std::string& origin)
+      : ref_(reference), ref_size_(size), deviation_(deviation), min_length_(min_length), max_vertices_(max_vertices),
+        origin_(origin) {
     Eigen::VectorXd x(3 * reference.V.rows());
     for (Eigen::Index i = 0; i < reference.V.rows(); ++i) x.segment<3>(3 * i) = reference.V.row(i).transpose();
     locator_.build(x, reference.F);
@@ -178,6 +181,9 @@ class Remesher {
   // thin part the projection may jump: the split would not shorten the edge) or a new triangle
   // would turn over.
   bool split_edge(int t, int a, int b) {
+    if (p_.size() >= max_vertices_)
+      throw MeshError(origin_ + ": remeshing stopped at " + std::to_string(p_.size()) +
+                      " vertices, more than the sizes asked for can need on this surface's area (runaway splitting)");
     const int u = across(t, a, b);
     const int c = opposite(t, a, b), d = opposite(u, a, b);
     const int m = static_cast<int>(p_.size());
@@ -346,6 +352,8 @@ class Remesher {
   const SurfaceMesh& ref_;
   const std::vector<double>& ref_size_;
   const double deviation_, min_length_;
+  const size_t max_vertices_;
+  const std::string origin_;
   SurfaceLocator locator_;
   std::vector<Eigen::Vector3d> p_;
   std::vector<double> size_;
@@ -363,7 +371,24 @@ SurfaceMesh remesh_surface(const SurfaceMesh& reference, const std::vector<doubl
     throw MeshError(origin + ": remeshing needs a closed surface and a size at each vertex");
   for (const double s : size)
     if (!(s > 0) || !std::isfinite(s)) throw MeshError(origin + ": remeshing: sizes must be finite and > 0");
-  Remesher r(reference, size, options.deviation, options.min_size);
+  // Edges of length L tile an area A with about 1.2 A / L^2 vertices (equilateral triangles);
+  // collapsed below 0.8 L and split anew, a pass may hold about four times that. Past 16 A / L^2
+  // summed over the reference's triangles (L the size there, or min_size where that is shorter:
+  // bulging edges are split down to it), and the reference's own vertices, the splitting has run
+  // away.
+  size_t cap = options.max_vertices;
+  if (cap == 0) {
+    double need = static_cast<double>(reference.V.rows());
+    for (Eigen::Index t = 0; t < reference.F.rows(); ++t) {
+      const Eigen::RowVector3d a = reference.V.row(reference.F(t, 0)), b = reference.V.row(reference.F(t, 1)),
+                               c = reference.V.row(reference.F(t, 2));
+      const double here = (size[reference.F(t, 0)] + size[reference.F(t, 1)] + size[reference.F(t, 2)]) / 3;
+      const double L = std::min(options.min_size, here);
+      need += 16 * 0.5 * (b - a).cross(c - a).norm() / (L * L);
+    }
+    cap = static_cast<size_t>(std::min(need, 1e9));
+  }
+  Remesher r(reference, size, options.deviation, options.min_size, cap, origin);
   r.run(options.iterations);
   return r.result(report);
 }
