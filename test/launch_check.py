@@ -19,7 +19,8 @@ def node_parameters():
     """Private parameters the node reads: ~name in param("name") / getParam("name") calls."""
     names = set()
     for path in glob.glob(os.path.join(PACKAGE, "src", "node", "*.cpp")):
-        names |= set(re.findall(r'\b(?:param|getParam)(?:<[^>]*>)?\(\s*"([a-z_]+)"', open(path).read()))
+        with open(path) as source:
+            names |= set(re.findall(r'\b(?:param|getParam)(?:<[^>]*>)?\(\s*"([a-z_]+)"', source.read()))
     return names
 
 

@@ -66,4 +66,7 @@ class BackgroundJob {
   std::thread thread_;  // last: started once the rest is built
 };
 
+// Processor time of the calling thread (s): what a job cost, whatever else shares its processor.
+double thread_cpu_time();
+
 }  // namespace liver_sim

@@ -1,16 +1,9 @@
 #include "liver_sim/registration/uncertainty_worker.h"
 
-#include <ctime>
 #include <stdexcept>
 
 namespace liver_sim {
 namespace {
-
-double thread_cpu_time() {  // s
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 bool finite(const std::vector<TargetUncertainty::Covariance>& covariances) {
   for (const TargetUncertainty::Covariance& c : covariances)

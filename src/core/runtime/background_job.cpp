@@ -1,5 +1,7 @@
 #include "liver_sim/runtime/background_job.h"
 
+#include <ctime>
+
 #include "liver_sim/runtime/worker_pool.h"
 
 namespace liver_sim {
@@ -41,6 +43,12 @@ void BackgroundJob::run() {
     lock.lock();
     state_ = cancelled_ ? State::Idle : State::Done;
   }
+}
+
+double thread_cpu_time() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
 }  // namespace liver_sim

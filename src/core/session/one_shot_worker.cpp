@@ -1,18 +1,8 @@
 #include "liver_sim/session/one_shot_worker.h"
 
-#include <ctime>
 #include <stdexcept>
 
 namespace liver_sim {
-namespace {
-
-double thread_cpu_time() {  // s
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
-
-}  // namespace
 
 OneShotWorker::OneShotWorker(const TetMesh& mesh, const Scene& scene, const OneShotOptions& options)
     : one_shot_(mesh, scene, options), job_([this] { solve(); }) {}
