@@ -9,27 +9,17 @@
 // (every step refactorises).
 #include <gtest/gtest.h>
 
-#include "liver_sim/simulation/liver_model.h"
-#include "regions.h"
+#include "contact/block_scenes.h"
 
 namespace liver_sim {
 namespace {
 
 TEST(KrylovTimeBudget, AStepPastItsBudgetStopsGmresAfterOneIterationAndStillReachesTheEquilibrium) {
   const double L = 0.02, r = 0.004;
-  Scene s;
-  s.parenchyma.young_modulus = 3000;
+  Scene s = block_scene(3000, 0.45, 0);
   s.solver.strategy = SolverOptions::Strategy::NewtonKrylov;
-  s.solver.tolerance = 1e-8;
   s.solver.max_iterations = 100;
-  s.contact.tolerance = 1e-7;
-  s.fixed.push_back(box({-1, -1, -1}, {1, 1, 1e-9}));  // the bottom face
-  InstrumentOptions probe;
-  probe.name = "probe";
-  probe.type = InstrumentOptions::Type::Probe;
-  probe.radius = r;
-  probe.position = Eigen::Vector3d(L / 2, L / 2, L + r - 0.002);  // 2 mm into the top face
-  s.instruments.push_back(probe);
+  s.instruments.push_back(probe("probe", Eigen::Vector3d(L / 2, L / 2, L + r - 0.002), r));  // 2 mm into the top face
 
   LiverModel unlimited(make_box_mesh({L, L, L}, {6, 6, 6}), s);
   const StepResult reference = unlimited.step();

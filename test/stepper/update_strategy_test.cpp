@@ -8,38 +8,27 @@
 // not converge).
 #include <gtest/gtest.h>
 
-#include "liver_sim/simulation/liver_model.h"
-#include "regions.h"
+#include "contact/block_scenes.h"
 
 namespace liver_sim {
 namespace {
 
 TEST(UpdateStrategy, EveryStrategyReachesTheSameContactEquilibrium) {
   const double L = 0.02, r = 0.004;
-  Scene s;
-  s.parenchyma.young_modulus = 3000;
-  s.solver.tolerance = 1e-8;
+  Scene s = block_scene(3000, 0.45, 0);
   s.solver.max_iterations = 400;  // the strategies without the rotation terms converge linearly
-  s.contact.tolerance = 1e-7;
-  s.fixed.push_back(box({-1, -1, -1}, {1, 1, 1e-9}));  // the bottom face
-  InstrumentOptions probe;
-  probe.name = "probe";
-  probe.type = InstrumentOptions::Type::Probe;
-  probe.radius = r;
-  probe.position = Eigen::Vector3d(L / 2, L / 2, L + r - 0.002);  // 2 mm into the top face
+  const InstrumentOptions pressing = probe("probe", Eigen::Vector3d(L / 2, L / 2, L + r - 0.002), r);  // 2 mm into the top face
 
   Eigen::Vector3d reference = Eigen::Vector3d::Zero();
   for (const char* word : {"full_newton", "modified_newton", "newton_krylov", "full_newton_eigen", "reused_factor_cg", "cg"}) {
     s.solver.strategy = *parse_strategy(word);
     LiverModel m(make_box_mesh({L, L, L}, {6, 6, 6}), s);
-    const int k = m.add_instrument(probe);
+    const int k = m.add_instrument(pressing);
     const StepResult result = m.step();
     ASSERT_TRUE(result.converged()) << word << ": " << result.message;
     const Eigen::Vector3d reaction = m.instrument_reaction(k).force;
     EXPECT_GT(reaction.z(), 0.0) << word;
-    Eigen::Vector3d support = Eigen::Vector3d::Zero();
-    const Eigen::VectorXd f = m.stepper().support_forces();
-    for (int i = 0; i < f.size(); i += 3) support += f.segment<3>(i);
+    const Eigen::Vector3d support = total(m.stepper().support_forces());
     EXPECT_LE((support - reaction).norm(), 1e-6 * reaction.norm()) << word;
     if (reference.isZero()) reference = reaction;
     EXPECT_LE((reaction - reference).norm(), 1e-5 * reference.norm()) << word << ": " << reaction.transpose();
