@@ -95,7 +95,13 @@ class OneShotRegistration {
   // scene the model refuses.
   OneShotRegistration(const TetMesh& mesh, const Scene& scene, const OneShotOptions& options);
 
-  // Registers the rest shape to `cloud` (its own frame; `start`: a first guess of its
+  // The shape the solve starts from, model frame: the rest shape unless set. A tracking session
+  // gives its model's state (the pre-operative equilibrium under gravity and supports, an
+  // instrument's press), held by constant loads (its internal forces) on the free model, the
+  // foundation anchored there: the fitted loads act on top of what the scene already explains.
+  void set_reference(const Eigen::VectorXd& positions);
+
+  // Registers the reference shape to `cloud` (its own frame; `start`: a first guess of its
   // transform into the model's frame), seen from `viewpoint` (the sensor's origin in the
   // cloud's frame) when known. Throws std::invalid_argument when no finite point lies within
   // start_gate of the model, or fewer than 50 points correspond.
@@ -117,7 +123,7 @@ class OneShotRegistration {
   // The point's registered position rides with it (`positions`, cloud frame).
   struct PointUncertainty {
     Eigen::Vector3d position;    // m, cloud frame
-    Eigen::Vector3d displacement;  // m: by the loads (the registered shape less the rest shape)
+    Eigen::Vector3d displacement;  // m: by the loads (the registered shape less the reference shape)
     Eigen::Matrix3d fit, model;    // m^2: the two parts
     Eigen::Vector3d prior;         // m: its motion per unit log of the damping
     Eigen::Matrix3d total() const { return fit + model; }
@@ -152,6 +158,8 @@ class OneShotRegistration {
   pcl::PointCloud<pcl::PointXYZ> points_;  // the cloud after filtering, its own frame
   std::vector<Eigen::Vector3d> normals_;   // theirs, same frame
   Eigen::Isometry3d alignment_ = Eigen::Isometry3d::Identity();
+  Eigen::VectorXd reference_;         // m: the start shape (set_reference)
+  Eigen::VectorXd reference_loads_;   // N: the constant loads that hold it
   Eigen::VectorXd loads_;  // per patch, stacked (N)
   // The last round's linearisation, for uncertainty(): B, the normal matrix with its damping,
   // the residuals' variance, the centre of the rigid steps.

@@ -32,8 +32,9 @@ class OneShotWorker {
     double cpu_time = 0;           // s, the thread's
   };
   // Unless one is running or done and not taken (false): starts the solve of `cloud` from
-  // `alignment` (the cloud's frame -> the model's).
-  bool start(Cloud cloud, const Eigen::Isometry3d& alignment);
+  // `alignment` (the cloud's frame -> the model's) and the shape `reference` (the session's
+  // model state: OneShotRegistration::set_reference).
+  bool start(Cloud cloud, const Eigen::Isometry3d& alignment, const Eigen::VectorXd& reference);
   // A solve done (once).
   std::optional<Result> take();
   void cancel() { job_.cancel(); }        // the one running is not handed over
@@ -45,6 +46,7 @@ class OneShotWorker {
 
   OneShotRegistration one_shot_;
   Eigen::Isometry3d alignment_ = Eigen::Isometry3d::Identity();
+  Eigen::VectorXd reference_;
   Result result_;
   BackgroundJob job_;  // last: destroyed first, waiting for a solve in progress
 };

@@ -142,8 +142,11 @@ class TrackingSession {
   // Registers the latest cloud, if one came since the last call (or starts its one-shot
   // registration, or leaves it for after the one running).
   std::optional<RegistrationFrame> register_pending_cloud(FrameReport& report);
-  // A one-shot registration done handed to the registration.
+  // A one-shot registration done handed to the registration; a cloud it refused is tracked.
   std::optional<RegistrationFrame> adopt_one_shot(FrameReport& report);
+  // The tracker's registration of `cloud`; none when refused. A refused cloud, or one it kept
+  // under one_shot_below_inliers of, calls for a one-shot registration of the next.
+  std::optional<RegistrationFrame> track(const Cloud& cloud);
   void count_registered(const RegistrationFrame& f, Stamp stamp);
   // The step that follows the inputs, behind the barrier, and the analysis after it.
   void simulate(FrameReport& report);

@@ -106,6 +106,8 @@ OneShotRegistration::OneShotRegistration(const TetMesh& mesh, const Scene& scene
   foundation.erase(std::remove_if(foundation.begin(), foundation.end(), [](const SurfaceTarget& s) { return s.triangle < 0; }),
                    foundation.end());
   model_->set_surface_targets(std::move(foundation));
+  reference_ = X;
+  reference_loads_ = Eigen::VectorXd::Zero(X.size());
   patches_ = make_surface_patches(m, options.patch_spacing);
   unit_loads_ = Eigen::MatrixXd::Zero(X.size(), 3 * patches_.centres.size());
   for (size_t p = 0; p < patches_.centres.size(); ++p)
@@ -140,11 +142,29 @@ std::vector<OneShotRegistration::Match> OneShotRegistration::match(const Eigen::
   return matches;
 }
 
+void OneShotRegistration::set_reference(const Eigen::VectorXd& positions) {
+  MechanicalModel& m = model_->mechanics();
+  if (positions.size() != m.rest_positions().size() || !positions.allFinite())
+    throw std::invalid_argument("the one-shot registration's reference is not a finite state of the model");
+  std::vector<SurfaceTarget> foundation = model_->surface_targets();
+  const Eigen::MatrixX3i& F = m.boundary();
+  for (SurfaceTarget& s : foundation) {
+    s.point.setZero();
+    for (int j = 0; j < 3; ++j) s.point += s.weights[j] * node(positions, F(s.triangle, j));
+  }
+  model_->set_surface_targets(std::move(foundation));
+  reference_ = positions;
+  Eigen::VectorXd internal, external;
+  m.internal_forces(reference_, internal);
+  m.external_forces(reference_, external);
+  reference_loads_ = internal - model_->load_scale() * external;
+}
+
 OneShotResult OneShotRegistration::solve(const pcl::PointCloud<pcl::PointXYZ>& cloud,
                                          const std::optional<Eigen::Vector3d>& viewpoint, const Eigen::Isometry3d& start) {
   const auto t0 = Clock::now();
   OneShotResult result;
-  const Eigen::VectorXd& X = model_->mechanics().rest_positions();
+  const Eigen::VectorXd& X = reference_;
   Eigen::AlignedBox3d box;
   for (Eigen::Index i = 0; i < X.size(); i += 3) box.extend(X.segment<3>(i));
   box.min().array() -= options_.start_gate;
@@ -166,7 +186,7 @@ OneShotResult OneShotRegistration::solve(const pcl::PointCloud<pcl::PointXYZ>& c
   alignment_ = start;
   model_->set_positions(X);
   loads_ = Eigen::VectorXd::Zero(unit_loads_.cols());
-  model_->set_surface_loads(Eigen::VectorXd::Zero(X.size()));
+  model_->set_surface_loads(reference_loads_);
   locator_.build(X, model_->boundary(), viewpoint ? std::optional<Eigen::Vector3d>(start * *viewpoint) : std::nullopt);
   if (!viewpoint) {
     // One side for the whole cloud: the one most points agree with the surface on.
@@ -191,7 +211,7 @@ OneShotResult OneShotRegistration::solve(const pcl::PointCloud<pcl::PointXYZ>& c
 }
 
 void OneShotRegistration::rigid_stage(OneShotResult& result) {
-  const Eigen::VectorXd& X = model_->mechanics().rest_positions();
+  const Eigen::VectorXd& X = reference_;
   const int n = options_.rigid_iterations;
   for (int it = 0; it < n; ++it) {
     const double gate = schedule(options_.start_gate, options_.end_gate, n > 1 ? static_cast<double>(it) / (n - 1) : 1.0);
@@ -288,7 +308,7 @@ void OneShotRegistration::deformation_stage(OneShotResult& result) {
     }
     if (round + 1 == options_.rounds) basis_.swap(B);
     loads_ += dg;
-    model_->set_surface_loads(unit_loads_ * loads_);
+    model_->set_surface_loads(reference_loads_ + unit_loads_ * loads_);
     settle(round + 1 < options_.rounds ? 1 : 2);
   }
   const Eigen::VectorXd& x = model_->positions();
@@ -346,7 +366,7 @@ std::vector<OneShotRegistration::PointUncertainty> OneShotRegistration::uncertai
   const Eigen::Matrix3d back = alignment_.linear().transpose();
   const Eigen::MatrixX4i& T = model_->mesh().T;
   const Eigen::VectorXd& x = model_->positions();
-  const Eigen::VectorXd& X = model_->mechanics().rest_positions();
+  const Eigen::VectorXd& X = reference_;
   // How the fit moves per unit log of the damping (at its optimum, the gradient zero):
   // dz/d ln lambda = -(N + lambda D)^-1 lambda D z.
   Eigen::VectorXd shift = Eigen::VectorXd::Zero(m + 6);

@@ -1,5 +1,7 @@
 #include "liver_sim/session/tracking_session.h"
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace liver_sim {
@@ -277,15 +279,30 @@ std::optional<RegistrationFrame> TrackingSession::register_pending_cloud(FrameRe
   }
   if (!cloud) return std::nullopt;
   if (one_shot_wanted_) {
+    // A cloud too small to track is too small to register in one shot: refused alike, the one-shot
+    // kept for the next.
+    const int min_points = registration_->options().min_points;
+    const long finite = std::count_if(cloud->points.begin(), cloud->points.end(), [](const pcl::PointXYZ& p) {
+      return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+    });
+    if (finite < min_points) {
+      notices_.refuse("points: " + std::to_string(finite) + " finite points, too few to register in one shot (registration.min_points: " +
+                      std::to_string(min_points) + ")");
+      return std::nullopt;
+    }
     one_shot_wanted_ = false;
-    one_shot_->start(std::move(*cloud), registration_->alignment());
+    one_shot_->start(std::move(*cloud), registration_->alignment(), model_->positions());
     report.one_shot = FrameReport::OneShot::Started;
     notices_.tell("one-shot registration of a cloud started");
     return std::nullopt;
   }
+  return track(*cloud);
+}
+
+std::optional<RegistrationFrame> TrackingSession::track(const Cloud& cloud) {
   try {
-    const RegistrationFrame f = registration_->register_cloud(cloud->points, cloud->viewpoint);
-    count_registered(f, cloud->stamp);
+    const RegistrationFrame f = registration_->register_cloud(cloud.points, cloud.viewpoint);
+    count_registered(f, cloud.stamp);
     if (one_shot_ && f.inlier_fraction < options_.one_shot_below_inliers) one_shot_wanted_ = true;
     return f;
   } catch (const std::invalid_argument& e) {
@@ -307,10 +324,11 @@ std::optional<RegistrationFrame> TrackingSession::adopt_one_shot(FrameReport& re
                   " ms of processor time)");
     return f;
   } catch (const std::invalid_argument& e) {
+    // A cloud too sparse or small for the one-shot's patches (a few square centimetres of
+    // surface) may still be one the tracker follows: tracked, and refused only if it refuses it.
     report.one_shot = FrameReport::OneShot::Refused;
-    notices_.refuse(std::string("one-shot registration: ") + e.what());
-    one_shot_wanted_ = true;
-    return std::nullopt;
+    notices_.tell(std::string("one-shot registration refused (") + e.what() + "): the cloud tracked instead");
+    return track(done->cloud);
   }
 }
 
