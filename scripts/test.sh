@@ -9,5 +9,5 @@ make -C "$WS/build" -j2 tests
 "$REPO/scripts/fuzz.sh" smoke
 install_status=0
 "$REPO/scripts/install_check.sh" || install_status=$?
-cd "$WS/build" && ctest --output-on-failure
+cd "$WS/build" && ctest -j2 --output-on-failure
 exit "$install_status"
