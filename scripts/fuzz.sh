@@ -17,29 +17,50 @@ OUT="$REPO/build/fuzz"
 mkdir -p "$OUT"
 FLAGS=(-std=c++17 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined
        -I"$REPO/include" -I/usr/include/eigen3)
-build() {  # target sources... [libraries]
-  local target=$1; shift
+# The targets' harnesses (test/fuzz/<target>.cpp) and the sources and libraries each links.
+TARGETS=(fuzz_mesh fuzz_vessel fuzz_scene fuzz_surface fuzz_label_map)
+sources() {
+  local core="$REPO/src/core"
+  case $1 in
+    fuzz_mesh) echo "$core/geometry/mesh.cpp $core/io/mesh_io.cpp" ;;
+    fuzz_vessel) echo "$core/geometry/vessel_tree.cpp $core/io/vessel_io.cpp $core/io/vtk_polydata.cpp -lyaml-cpp" ;;
+    fuzz_scene) echo "$core/scene/scene.cpp $core/scene/scene_overrides.cpp $core/scene/options.cpp $core/geometry/region.cpp -lyaml-cpp" ;;
+    fuzz_surface) echo "$core/io/surface_io.cpp $core/io/vtk_polydata.cpp $core/meshing/surface_repair.cpp" ;;
+    fuzz_label_map) echo "$core/io/label_map_io.cpp -lz" ;;
+  esac
+}
+build() {  # target: rebuilt when a source it may use is newer
+  local target=$1
   if [ ! -x "$OUT/$target" ] || [ -n "$(find "$REPO/src/core" "$REPO/include" "$REPO/test/fuzz" -newer "$OUT/$target" -print -quit)" ]; then
-    clang++ "${FLAGS[@]}" "$@" -o "$OUT/$target"
+    # shellcheck disable=SC2046  # the sources' list splits into its words
+    clang++ "${FLAGS[@]}" "$REPO/test/fuzz/$target.cpp" $(sources "$target") -o "$OUT/$target"
   fi
 }
-build fuzz_mesh "$REPO/test/fuzz/fuzz_mesh.cpp" "$REPO/src/core/geometry/mesh.cpp" "$REPO/src/core/io/mesh_io.cpp"
-build fuzz_vessel "$REPO/test/fuzz/fuzz_vessel.cpp" "$REPO/src/core/geometry/vessel_tree.cpp" "$REPO/src/core/io/vessel_io.cpp" "$REPO/src/core/io/vtk_polydata.cpp" \
-  -lyaml-cpp
-build fuzz_scene "$REPO/test/fuzz/fuzz_scene.cpp" "$REPO/src/core/scene/scene.cpp" "$REPO/src/core/scene/scene_overrides.cpp" \
-  "$REPO/src/core/scene/options.cpp" \
-  "$REPO/src/core/geometry/region.cpp" -lyaml-cpp
-build fuzz_surface "$REPO/test/fuzz/fuzz_surface.cpp" "$REPO/src/core/io/surface_io.cpp" "$REPO/src/core/io/vtk_polydata.cpp" \
-  "$REPO/src/core/meshing/surface_repair.cpp"
-build fuzz_label_map "$REPO/test/fuzz/fuzz_label_map.cpp" "$REPO/src/core/io/label_map_io.cpp" -lz
-for target in fuzz_mesh fuzz_vessel fuzz_scene fuzz_surface fuzz_label_map; do
-  corpus="$OUT/corpus_${target#fuzz_}"
+fuzz() {  # target: fuzzes it, its output in build/fuzz/<target>.log
+  local target=$1 corpus="$OUT/corpus_${1#fuzz_}"
   [ "$DESCRIPTION" = smoke ] && corpus="$OUT/smoke_${target#fuzz_}" && rm -rf "$corpus"
   mkdir -p "$corpus"
-  log="$OUT/$target.log"
   (cd "$OUT" && "./$target" "${LIMIT[@]}" -print_final_stats=1 -timeout=10 -rss_limit_mb=2048 \
-     "$corpus" "$REPO/test/fuzz/seeds/${target#fuzz_}" >"$log" 2>&1) || {
-    tail -40 "$log"; echo "fuzz: $target FAILED (log: $log)" >&2; exit 1; }
-  runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$')
+     "$corpus" "$REPO/test/fuzz/seeds/${target#fuzz_}" >"$OUT/$target.log" 2>&1) || {
+    tail -40 "$OUT/$target.log"; echo "fuzz: $target FAILED (log: $OUT/$target.log)" >&2; return 1; }
+}
+# Runs the function on every target, two at a time (the targets are independent, each one
+# process on one core); fails when any of them failed, after all have ended.
+each_target() {
+  local status=0 running=0
+  for target in "${TARGETS[@]}"; do
+    if [ "$running" -ge 2 ]; then wait -n || status=1; running=$((running - 1)); fi
+    "$1" "$target" &
+    running=$((running + 1))
+  done
+  for _ in $(seq "$running"); do wait -n || status=1; done
+  return "$status"
+}
+each_target build
+each_target fuzz
+for target in "${TARGETS[@]}"; do
+  corpus="$OUT/corpus_${target#fuzz_}"
+  [ "$DESCRIPTION" = smoke ] && corpus="$OUT/smoke_${target#fuzz_}"
+  runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$OUT/$target.log" | grep -o '[0-9]*$')
   echo "fuzz: $target ($DESCRIPTION): $runs inputs, corpus $(ls "$corpus" | wc -l) files, no crash"
 done
