@@ -4,7 +4,8 @@
 # Checks: --help exits 0 and names every option; bad command lines exit 2, bad inputs exit 1 with
 # one line naming the file and the defect; the phantom's surface given in RAS millimetres makes the
 # same mesh byte for byte as in LPS; two runs write identical files; the scene converges in the
-# simulator under gravity with the phantom's portal tree embedded, and so does the re-surfaced one.
+# simulator under gravity with the phantom's portal tree embedded, and so does the re-surfaced one;
+# a target missed exits 3 naming the bound and by how much.
 set -euo pipefail
 MAKE_MODEL=$1 SIMULATE=$2 OUT=$3
 REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -42,6 +43,17 @@ common=(--elements 2500 --quiet)
 [ "$(run --surface "$OUT/lps.stl" --out "$OUT/lps" "${common[@]}")" = 0 ] || fail "LPS run: $(cat "$OUT/err")"
 [ "$(run --surface "$OUT/ras.stl" --input-frame RAS --out "$OUT/ras" "${common[@]}")" = 0 ] || fail "RAS run: $(cat "$OUT/err")"
 cmp -s "$OUT/lps/liver.msh" "$OUT/ras/liver.msh" || fail "the RAS surface did not give the LPS mesh"
+# A bound the mesh cannot meet (its boundary within 0.05 mm of the surface) is said, with the value
+# measured and the excess, and the run exits 3. Kills: the Hausdorff target unchecked (tried: exit 0).
+[ "$(run --surface "$OUT/lps.stl" --out "$OUT/tight" --max-hausdorff 0.05 "${common[@]}")" = 3 ] ||
+  fail "--max-hausdorff 0.05: expected exit 3: $(cat "$OUT/err")"
+/usr/bin/python3 -c '
+import json, re, sys
+r = json.load(open(sys.argv[1]))
+m = re.search(r"Hausdorff distance ([0-9.]+) mm .*, ([0-9.]+) mm over --max-hausdorff 0.05", r["targets"]["missed"])
+d = 1e3 * r["hausdorff_m"]["hausdorff"]
+sys.exit(0 if m and not r["targets"]["met"] and abs(float(m.group(1)) - d) < 0.01 and abs(float(m.group(2)) - (d - 0.05)) < 0.01 else 1)
+' "$OUT/out.json" || fail "--max-hausdorff 0.05: $(cat "$OUT/err")"
 # A run that cannot finish in its time limit ends with a message, not a hang.
 [ "$(run --surface "$OUT/lps.stl" --out "$OUT/slow" --elements 200000 --time-limit 1 --quiet)" = 1 ] || fail "time limit: expected exit 1"
 grep -q "time limit" "$OUT/err" || fail "time limit: $(cat "$OUT/err")"
