@@ -219,7 +219,7 @@ int run(const Options& o) {
                    {"tetrahedra", o.size > 0 ? Json(nullptr) : Json(o.elements)},
                    {"tetrahedra_tolerance", kCountTolerance},
                    {"hausdorff_m", o.max_hausdorff > 0 ? o.max_hausdorff * o.unit : 1.5e-3},
-                   {"volume_tolerance", kVolumeTolerance},
+                   {"volume_change_percent", o.max_volume_change},
                    {"met", missed.empty()},
                    {"missed", missed}};
   js["time_s"] = times;

@@ -77,9 +77,10 @@ std::string missed_shape_targets(const Options& o, const SurfaceDeviation& dista
              ", " + fixed(at[1], 1) + ", " + fixed(at[2], 1) + ") " + o.unit_name + ", LPS)";
   }
   const double off = mesh_volume / surface_volume - 1.0;
-  if (std::abs(off) > kVolumeTolerance)
-    missed = join(missed, "the mesh's volume " + fixed(100 * off, 2) + "% from the surface's, the bound is " +
-                              fixed(100 * kVolumeTolerance, 0) + "%");
+  if (std::abs(100 * off) > o.max_volume_change)
+    missed = join(missed, "the mesh's volume " + fixed(100 * off, 2) + "% from the surface's, " +
+                              fixed(std::abs(100 * off) - o.max_volume_change, 2) + " points over --max-volume-change " +
+                              fixed(o.max_volume_change, 2) + "% (the boundary's chords cut the curved surface)");
   return missed;
 }
 

@@ -55,15 +55,14 @@ struct ModelMesh {
   std::vector<std::pair<std::string, double>> times;  // stage, s
 };
 
-// The targets' tolerances: the element count within 15% of --elements, the mesh's volume within
-// 1% of the surface's.
-constexpr double kCountTolerance = 0.15, kVolumeTolerance = 0.01;
+// The element count's target: within 15% of --elements.
+constexpr double kCountTolerance = 0.15;
 
 // Throws MeshError (bad input, with the file and the defect) or CommandLineError.
 ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::string&)>& say);
 
 // The shape's targets: the Hausdorff distance between the mesh's boundary and the surface it
-// meshed (--max-hausdorff), and their volumes. Each missed one with its value, the bound and by
+// meshed (--max-hausdorff), and their volumes (--max-volume-change). Each missed one with its value, the bound and by
 // how much ("; " between them); empty when both are met.
 std::string missed_shape_targets(const Options& o, const SurfaceDeviation& distance, double surface_volume,
                                  double mesh_volume);
