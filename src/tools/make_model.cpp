@@ -218,7 +218,7 @@ int run(const Options& o) {
   js["targets"] = {{"min_dihedral_deg", o.min_dihedral},
                    {"tetrahedra", o.size > 0 ? Json(nullptr) : Json(o.elements)},
                    {"tetrahedra_tolerance", kCountTolerance},
-                   {"hausdorff_m", o.max_hausdorff > 0 ? o.max_hausdorff * o.unit : 1.5e-3},
+                   {"hausdorff_m", hausdorff_bound(o)},
                    {"volume_change_percent", o.max_volume_change},
                    {"met", missed.empty()},
                    {"missed", missed}};

@@ -67,7 +67,7 @@ std::string missed_mesh_targets(const Options& o, const TetQuality& q, const Tet
 std::string missed_shape_targets(const Options& o, const SurfaceDeviation& distance, double surface_volume,
                                  double mesh_volume) {
   std::string missed;
-  const double bound = o.max_hausdorff > 0 ? o.max_hausdorff * o.unit : 1.5e-3;
+  const double bound = hausdorff_bound(o);
   if (distance.hausdorff() > bound) {
     const OneSidedDeviation& far = distance.a_to_b.max >= distance.b_to_a.max ? distance.a_to_b : distance.b_to_a;
     const Eigen::Vector3d at = far.farthest / o.unit;
@@ -83,7 +83,6 @@ std::string missed_shape_targets(const Options& o, const SurfaceDeviation& dista
                               fixed(o.max_volume_change, 2) + "% (the boundary's chords cut the curved surface)");
   return missed;
 }
-
 
 ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::string&)>& say) {
   ModelMesh r;

@@ -58,12 +58,15 @@ struct ModelMesh {
 // The element count's target: within 15% of --elements.
 constexpr double kCountTolerance = 0.15;
 
+// The Hausdorff distance's target, m: --max-hausdorff, 1.5 mm by default.
+inline double hausdorff_bound(const Options& o) { return o.max_hausdorff > 0 ? o.max_hausdorff * o.unit : 1.5e-3; }
+
 // Throws MeshError (bad input, with the file and the defect) or CommandLineError.
 ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::string&)>& say);
 
 // The shape's targets: the Hausdorff distance between the mesh's boundary and the surface it
-// meshed (--max-hausdorff), and their volumes (--max-volume-change). Each missed one with its value, the bound and by
-// how much ("; " between them); empty when both are met.
+// meshed (--max-hausdorff), and their volumes (--max-volume-change). Each missed one with its
+// value, the bound and by how much ("; " between them); empty when both are met.
 std::string missed_shape_targets(const Options& o, const SurfaceDeviation& distance, double surface_volume,
                                  double mesh_volume);
 
