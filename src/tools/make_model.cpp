@@ -4,7 +4,7 @@
 // file the simulator and the node run. doc/patient_model.md explains the options; `make_model
 // --help` lists them. Progress goes to standard error, a JSON report to standard output. Exit
 // status: 0 done, 1 bad input (one line naming the file and the defect), 2 bad command line, 3
-// written but a target (smallest dihedral angle, element count) missed.
+// written but a target (smallest dihedral angle, element count, Hausdorff distance, volume) missed.
 #include <unistd.h>
 
 #include <csignal>
@@ -177,6 +177,7 @@ int run(const Options& o) {
       resurfacing["input_to_mesh_m"] = deviation(*mesh_from_input);
     }
   }
+  const double surface_volume = enclosed_volume(surface), mesh_volume = enclosed_volume(boundary);
   Json js;
   js[o.label_map.empty() ? "surface" : "label_map"] = m.input_name;
   js["scene"] = (dir / scene_file).string();
@@ -191,8 +192,8 @@ int run(const Options& o) {
   js["surface_triangles"] = surface.F.rows();
   js["resurfacing"] = resurfacing;
   js["volume_m3"] = {{"input", m.input.F.rows() > 0 ? Json(enclosed_volume(m.input)) : Json(nullptr)},
-                     {"surface", enclosed_volume(surface)},
-                     {"mesh", enclosed_volume(boundary)}};
+                     {"surface", surface_volume},
+                     {"mesh", mesh_volume}};
   js["nodes"] = mesh.V.rows();
   js["tetrahedra"] = mesh.T.rows();
   js["boundary_triangles"] = boundary.F.rows();
@@ -211,15 +212,21 @@ int run(const Options& o) {
                        {"hausdorff", distance.hausdorff()}};
   js["fixed_nodes"] = fixed_nodes;
   js["vessels"] = o.vessels.size();
+  std::string missed = m.missed;
+  if (const std::string shape = missed_shape_targets(o, distance, surface_volume, mesh_volume); !shape.empty())
+    missed += (missed.empty() ? "" : "; ") + shape;
   js["targets"] = {{"min_dihedral_deg", o.min_dihedral},
                    {"tetrahedra", o.size > 0 ? Json(nullptr) : Json(o.elements)},
-                   {"met", m.missed.empty()},
-                   {"missed", m.missed}};
+                   {"tetrahedra_tolerance", kCountTolerance},
+                   {"hausdorff_m", hausdorff_bound(o)},
+                   {"volume_change_percent", o.max_volume_change},
+                   {"met", missed.empty()},
+                   {"missed", missed}};
   js["time_s"] = times;
   tool::print_json(std::cout, js);
   say("wrote " + (dir / mesh_file).string() + " and " + (dir / scene_file).string());
-  if (!m.missed.empty()) {
-    std::cerr << "make_model: " << m.input_name << ": the model is written but misses its targets: " << m.missed << "\n";
+  if (!missed.empty()) {
+    std::cerr << "make_model: " << m.input_name << ": the model is written but misses its targets: " << missed << "\n";
     return 3;
   }
   return 0;

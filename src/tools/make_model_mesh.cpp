@@ -26,21 +26,63 @@ int resolve_label(const std::string& text, const LabelImage& image, const std::s
   throw MeshError(origin + ": no segment named '" + text + "'" + (names.empty() ? " (the file names none)" : "; segments: " + names));
 }
 
-// Which targets the mesh misses, and why; empty when it meets them all.
-std::string missed_targets(const Options& o, const TetQuality& q, const TetMesh& mesh, bool sized) {
-  const Eigen::Index tetrahedra = mesh.T.rows();
-  std::ostringstream m;
+std::string join(const std::string& a, const std::string& b) { return a.empty() ? b : b.empty() ? a : a + "; " + b; }
+
+std::string fixed(double x, int digits) {
+  std::ostringstream s;
+  s.setf(std::ios::fixed);
+  s.precision(digits);
+  s << x;
+  return s.str();
+}
+
+// The mesh's own targets (smallest dihedral angle, element count), each missed one with its
+// value, the bound and why; empty when both are met.
+std::string missed_mesh_targets(const Options& o, const TetQuality& q, const TetMesh& mesh, const VolumeMeshReport& report,
+                                bool sized) {
+  std::string missed;
   if (q.min_dihedral_deg < o.min_dihedral)
-    m << "smallest dihedral angle " << q.min_dihedral_deg << " deg, under --min-dihedral " << o.min_dihedral
-      << " (slivers gmsh's optimiser could not remove)";
-  if (!sized && std::abs(static_cast<double>(tetrahedra) / o.elements - 1.0) > 0.15)
-    m << (m.tellp() > 0 ? "; " : "") << tetrahedra << " tetrahedra, more than 15% from --elements " << o.elements
-      << " (the boundary needs " << boundary_triangles(mesh.T).rows()
-      << " triangles to stay within --max-deviation: ask for more --elements or a larger --max-deviation)";
-  return m.str();
+    missed = "smallest dihedral angle " + fixed(q.min_dihedral_deg, 2) + " deg, " +
+             fixed(o.min_dihedral - q.min_dihedral_deg, 2) + " deg under --min-dihedral " + fixed(o.min_dihedral, 1) +
+             " (slivers neither gmsh's optimiser nor the sliver repair could remove)";
+  const double tetrahedra = static_cast<double>(mesh.T.rows());
+  const double off = tetrahedra / o.elements - 1.0;
+  if (!sized && std::abs(off) > kCountTolerance) {
+    const Eigen::Index boundary = boundary_triangles(mesh.T).rows();
+    std::ostringstream m;
+    m << mesh.T.rows() << " tetrahedra for --elements " << o.elements << ": " << fixed(100 * std::abs(off), 0) << "% "
+      << (off > 0 ? "over" : "under") << ", the bound is " << fixed(100 * kCountTolerance, 0) << "%";
+    if (off > 0)
+      m << " (the boundary needs " << boundary << " triangles to stay within --max-deviation of the surface, and the "
+        << "volume inside them, its edges up to " << fixed(report.element_size / o.unit, 1) << " " << o.unit_name
+        << ", holds " << fixed(tetrahedra / boundary, 2) << " tetrahedra per boundary triangle: ask for about "
+        << mesh.T.rows() << " --elements or a larger --max-deviation)";
+    missed = join(missed, m.str());
+  }
+  return missed;
 }
 
 }  // namespace
+
+std::string missed_shape_targets(const Options& o, const SurfaceDeviation& distance, double surface_volume,
+                                 double mesh_volume) {
+  std::string missed;
+  const double bound = hausdorff_bound(o);
+  if (distance.hausdorff() > bound) {
+    const OneSidedDeviation& far = distance.a_to_b.max >= distance.b_to_a.max ? distance.a_to_b : distance.b_to_a;
+    const Eigen::Vector3d at = far.farthest / o.unit;
+    missed = "Hausdorff distance " + fixed(distance.hausdorff() / o.unit, 2) + " " + o.unit_name +
+             " between the mesh's boundary and the surface it meshed, " + fixed((distance.hausdorff() - bound) / o.unit, 2) +
+             " " + o.unit_name + " over --max-hausdorff " + fixed(bound / o.unit, 2) + " (farthest at (" + fixed(at[0], 1) +
+             ", " + fixed(at[1], 1) + ", " + fixed(at[2], 1) + ") " + o.unit_name + ", LPS)";
+  }
+  const double off = mesh_volume / surface_volume - 1.0;
+  if (std::abs(100 * off) > o.max_volume_change)
+    missed = join(missed, "the mesh's volume " + fixed(100 * off, 2) + "% from the surface's, " +
+                              fixed(std::abs(100 * off) - o.max_volume_change, 2) + " points over --max-volume-change " +
+                              fixed(o.max_volume_change, 2) + "% (the boundary's chords cut the curved surface)");
+  return missed;
+}
 
 ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::string&)>& say) {
   ModelMesh r;
@@ -143,7 +185,7 @@ ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::
       r.quality = tet_quality(r.mesh);
       r.times.emplace_back("slivers", clock.lap());
     }
-    r.missed = missed_targets(o, r.quality, r.mesh, o.size > 0);
+    r.missed = missed_mesh_targets(o, r.quality, r.mesh, r.mesh_report, o.size > 0);
     if (r.missed.empty() || !may_resurface || r.resurfaced) break;
     resurface_input(r.input_name + ": " + r.missed);
   }

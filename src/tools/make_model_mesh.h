@@ -2,7 +2,7 @@
 // or re-surfaced from its enclosed volume when it cannot be (--resurface auto: holes, crossings,
 // non-manifold parts, stair-steps that split it into many patches, a gmsh failure or a missed
 // target on it); a label map always re-surfaced. Then the targets checked: the smallest dihedral
-// angle and the element count.
+// angle and the element count here, the shape (Hausdorff distance, volume) once measured.
 #pragma once
 
 #include <chrono>
@@ -16,6 +16,7 @@
 #include "liver_sim/geometry/surface_mesh.h"
 #include "liver_sim/meshing/resurface.h"
 #include "liver_sim/meshing/sliver_repair.h"
+#include "liver_sim/meshing/surface_deviation.h"
 #include "liver_sim/meshing/surface_repair.h"
 #include "liver_sim/meshing/volume_mesher.h"
 #include "make_model_options.h"
@@ -50,11 +51,23 @@ struct ModelMesh {
   VolumeMeshReport mesh_report;
   SliverRepairReport slivers;      // when gmsh's mesh missed --min-dihedral
   TetQuality quality;
-  std::string missed;              // the targets missed and why; empty when all are met
+  std::string missed;              // the mesh's targets missed and why; empty when met
   std::vector<std::pair<std::string, double>> times;  // stage, s
 };
 
+// The element count's target: within 15% of --elements.
+constexpr double kCountTolerance = 0.15;
+
+// The Hausdorff distance's target, m: --max-hausdorff, 1.5 mm by default.
+inline double hausdorff_bound(const Options& o) { return o.max_hausdorff > 0 ? o.max_hausdorff * o.unit : 1.5e-3; }
+
 // Throws MeshError (bad input, with the file and the defect) or CommandLineError.
 ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::string&)>& say);
+
+// The shape's targets: the Hausdorff distance between the mesh's boundary and the surface it
+// meshed (--max-hausdorff), and their volumes (--max-volume-change). Each missed one with its
+// value, the bound and by how much ("; " between them); empty when both are met.
+std::string missed_shape_targets(const Options& o, const SurfaceDeviation& distance, double surface_volume,
+                                 double mesh_volume);
 
 }  // namespace liver_sim

@@ -135,6 +135,16 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
                  "of the surface, > 0 (input unit; default 0.5 mm)")
       ->option_text("D")
       ->check(tool::positive());
+  app.add_option("--max-hausdorff", o->max_hausdorff,
+                 "target: the mesh's boundary and the surface it meshed lie within D of each other,\n"
+                 "> 0 (input unit; default 1.5 mm)")
+      ->option_text("D")
+      ->check(tool::positive());
+  app.add_option("--max-volume-change", o->max_volume_change,
+                 "target: the mesh's volume within PCT percent of the surface's, in (0, 100]\n"
+                 "(default 1)")
+      ->option_text("PCT")
+      ->check(in("in (0, 100]", 1e-9, 100));
   app.add_option("--merge-distance", o->merge_distance,
                  "vertices closer than D are merged, >= 0 (input unit; default 0: 1e-6 of the\n"
                  "surface's bounding-box diagonal)")

@@ -27,6 +27,8 @@ struct Options {
   double size = 0;  // input unit
   double feature_angle = 40;
   double max_deviation = -1;  // input unit; < 0: 0.5 mm
+  double max_hausdorff = -1;  // input unit; < 0: 1.5 mm
+  double max_volume_change = 1;  // percent
   double merge_distance = 0;  // input unit
   bool largest_shell = false;
   Resurface resurface = Resurface::Auto;
