@@ -182,10 +182,9 @@ TEST(Probe, AFactorServesTheIterationAfterTheOneThatMadeIt) {
 // Haptic frames (1 ms) with stiffness-proportional damping (b = 0.02 s: the step's matrix is
 // 21 K + M/dt^2): a probe sweeping across a block with a capsule, one modified-Newton iteration a
 // frame, against converged dynamics. Every frame must end with its gaps closed to the contact
-// tolerance (Signorini) and within 1% of the peak motion of converged dynamics (0.34%; full
-// Newton, a fresh factor every frame, 0.07%). Kills the line search's merit weighing a gap by the
-// undamped stiffness E L (the scale 1 + b/dt dropped): the closing update of a new contact on a
-// kept factor is then cut short, gaps of 9 um stay open for frames, 2.3% of the peak motion.
+// tolerance (Signorini) and within 1% of the peak motion of converged dynamics (full Newton, a
+// fresh factor every frame: 0.07%). Kills dropping the redo of a contact update that the line
+// search cut short on a kept factor: gaps of 9 um then stay open for frames, 2.3% of the motion.
 TEST(Probe, DampedHapticFramesCloseNewGaps) {
   const double r = 0.002, depth = 0.001, speed = 0.03;  // m, m, m/s
   Scene s = block_scene(3500, 0.45, 0.3);

@@ -20,8 +20,6 @@ class NewtonMatrix {
 
   // A at the model's last evaluation; its wall time is added to timing.assembly_ms.
   void assemble(StepTiming& timing);
-  // The factor on K in A: 1 + b/dt in a dynamic step, 1 in a static one.
-  double stiffness_scale() const;
   const SparsePattern& pattern() const { return mechanics_.pattern(); }
   const std::vector<double>& values() const { return values_; }
   std::vector<double>& values() { return values_; }

@@ -12,17 +12,14 @@ NewtonMatrix::NewtonMatrix(MechanicalModel& mechanics, const SolverOptions& solv
 
 void NewtonMatrix::assemble(StepTiming& timing) {
   const auto t0 = std::chrono::steady_clock::now();
-  double m_scale = 0.0;
+  double k_scale = 1.0, m_scale = 0.0;
   if (solver_.mode == SolverOptions::Mode::Dynamic) {
     const double dt = solver_.dt;
+    k_scale = 1.0 + solver_.rayleigh_stiffness / dt;
     m_scale = 1.0 / (dt * dt) + solver_.rayleigh_mass / dt;
   }
-  mechanics_.assemble(stiffness_scale(), m_scale, values_);
+  mechanics_.assemble(k_scale, m_scale, values_);
   timing.assembly_ms += ms_since(t0);
-}
-
-double NewtonMatrix::stiffness_scale() const {
-  return solver_.mode == SolverOptions::Mode::Dynamic ? 1.0 + solver_.rayleigh_stiffness / solver_.dt : 1.0;
 }
 
 }  // namespace liver_sim
