@@ -61,8 +61,7 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     // started and roll it back as stalled), or whose contact update the search had to cut
     // short: the factor no longer fits the state. Redone on a fresh one, once per Newton solve
     // (per instrument stage), instead of spent. A cut contact update leaves the gaps it was to
-    // close open, frame after frame while the factor is kept (haptic frames, 1 ms, on the probe
-    // cube: 5-57 um for up to seven frames, 3.3% of the motion).
+    // close open, frame after frame while the factor is kept (doc/performance.md).
     const bool no_descent = taken.merit >= s.merit && (!taken.accepted || s.done() == solver_.max_iterations);
     if (update.redoes_without_descent() && !fresh_factor && !s.refreshed &&
         (no_descent || (contact_update && taken.alpha < 1))) {
