@@ -142,6 +142,7 @@ class NewtonStepper {
   struct LineSearch {
     double norm, merit, reference;  // at the point taken
     bool accepted;                  // a trial passed the merit or the potential test
+    double alpha;                   // the share of the update taken
   };
   // Whether the solve ends before another iteration: non-finite, blown up, converged, capped.
   bool solve_ends(Solve& s);

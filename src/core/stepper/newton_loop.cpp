@@ -58,10 +58,13 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     const LineSearch taken = line_search(s, contact_update);
     // An iteration on an old factor that finds no descent (no trial accepted, or only by the
     // potential test in the last iteration allowed, which would end the step above where it
-    // started and roll it back as stalled): the factor no longer fits the state. Redone on a
-    // fresh one, once per Newton solve (per instrument stage), instead of spent.
-    if (update.redoes_without_descent() && !fresh_factor && !s.refreshed && taken.merit >= s.merit &&
-        (!taken.accepted || s.done() == solver_.max_iterations)) {
+    // started and roll it back as stalled), or whose contact update the search had to cut
+    // short: the factor no longer fits the state. Redone on a fresh one, once per Newton solve
+    // (per instrument stage), instead of spent. A cut contact update leaves the gaps it was to
+    // close open, frame after frame while the factor is kept (doc/performance.md).
+    const bool no_descent = taken.merit >= s.merit && (!taken.accepted || s.done() == solver_.max_iterations);
+    if (update.redoes_without_descent() && !fresh_factor && !s.refreshed &&
+        (no_descent || (contact_update && taken.alpha < 1))) {
       if (!undo_for_fresh_factor(s, contact_update)) break;
       continue;
     }
@@ -194,7 +197,7 @@ NewtonStepper::LineSearch NewtonStepper::line_search(const Solve& s, bool contac
     if (!fixed[i]) slope0 += r_[i] * dx_[i];
   // The best norm starts as NaN: a search whose every trial is non-finite ends at the detector.
   LineSearch best{std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(), s.reference,
-                  false};
+                  false, 1.0};
   double alpha = 1.0, best_alpha = 1.0;
   const int max_halvings = solver_.line_search ? 6 : 0;
   for (int h = 0;; ++h) {
@@ -214,6 +217,7 @@ NewtonStepper::LineSearch NewtonStepper::line_search(const Solve& s, bool contac
     alpha *= 0.5;
   }
   // None was good enough: take the best one tried.
+  best.alpha = best_alpha;
   if (best_alpha != alpha) {
     x_try_ = x_ + best_alpha * dx_;
     if (contact_update) contact_.scale_update(best_alpha);
