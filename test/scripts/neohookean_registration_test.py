@@ -42,8 +42,9 @@ class NeoHookeanRegistration(unittest.TestCase):
     def test_the_supports_hold_what_the_view_does_not_show(self):
         # Targets of issue 49 (mean <= 2 mm, p95 <= 4 mm) on both half views, and the superior
         # view's targets inside their 95% ellipsoids in every depth band. Mutation seen failing:
-        # the scene's supports left free (the `support` springs dropped in the one-shot's
-        # foundation): superior mean 1.93-2.01 mm, p95 3.8-3.9 mm, 76-82% inside.
+        # the scene's supports left free (the `support` term of the one-shot's foundation
+        # springs zero, run as --set support=0 on the same draw): superior mean 2.00 mm, p95
+        # 3.88 mm, 78% inside.
         for view in ("anterior", "superior"):
             r = self.rows[view]
             with self.subTest(view=view):
