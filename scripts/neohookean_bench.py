@@ -4,8 +4,9 @@
 they are there, runs register_insilico with the phantom's scene on each case's partial views
 (1 mm sensor noise by default), and prints per case and view the TRE over the interior nodes
 (mean, p95, max, the deepest 10%), the calibration of the targets' 95% ellipsoids and the best
-rigid fit of all nodes (the floor of a rigid registration). No registration option is chosen
-here: every number is held out. The rows are kept in OUT/<case>.csv.
+rigid fit of all nodes (the floor of a rigid registration). One registration option, the soft
+supports' stiffness (`support`), was chosen on the packing case: the retractor case is held out.
+The rows are kept in OUT/<case>.csv.
 
 usage: scripts/neohookean_bench.py [--out DIR] [--register-insilico PATH] [--scene FILE]
                                    [--case packing,retractor] [--noise M] [--repeats R]

@@ -19,7 +19,7 @@ void set_one_shot_option(OneShotOptions& o, const std::string& assignment) {
       {"voxel_size", &o.voxel_size},         {"start_gate", &o.start_gate},           {"end_gate", &o.end_gate},
       {"max_normal_angle", &o.max_normal_angle}, {"trim_fraction", &o.trim_fraction}, {"huber_width", &o.huber_width},
       {"patch_spacing", &o.patch_spacing},   {"start_damping", &o.start_damping},     {"load_damping", &o.load_damping},
-      {"foundation", &o.foundation},         {"posterior_scale", &o.posterior_scale}, {"damping_error", &o.damping_error},
+      {"foundation", &o.foundation},         {"support", &o.support},                 {"posterior_scale", &o.posterior_scale}, {"damping_error", &o.damping_error},
       {"model_error_floor", &o.model_error_floor}, {"displacement_error", &o.displacement_error}};
   const std::map<std::string, int*> counts = {{"max_points", &o.max_points},
                                               {"normal_neighbours", &o.normal_neighbours},

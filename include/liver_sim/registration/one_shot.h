@@ -5,10 +5,11 @@
 // The unknowns are the rigid motion between the model's frame and the cloud's, and the forces
 // on the organ's surface that deform it (a force per surface patch, patch_spacing apart, each a
 // Gaussian bump as in surface_patches.h, on every patch: the surgery's forces and the unknown
-// attachments' reactions alike). The model is free: its scene's supports are left out (they are
-// a guess the cloud may contradict) and a weak elastic foundation on the whole surface (the
-// surrounding organs) holds it where no force acts; the rigid motion is the cloud's, not the
-// model's, so the foundation does not resist it.
+// attachments' reactions alike). The scene's supports are not held rigidly (they are a guess
+// the cloud may contradict): a weak elastic foundation on the whole surface (the surrounding
+// organs) holds the model where no force acts, stiffer where the scene's supports are (so that
+// a view of part of the organ does not let the part it does not show drift); the rigid motion
+// is the cloud's, not the model's, so the foundation does not resist it.
 //
 // 1. Rigid initialisation: point-to-plane ICP of the cloud to the rest shape's surface, exact
 //    closest points on the triangles within a gate that shrinks from start_gate to end_gate,
@@ -61,6 +62,8 @@ struct OneShotOptions {
   double load_damping = 3e-3;      // -, in [1e-9, 1e3]: at the end, over the mean diagonal of the normal matrix
   double foundation = 0.1;         // -, in (0, 10]: the foundation's stiffness per area over E / L (E the
                                    // parenchyma's Young's modulus, L the cube root of the volume)
+  double support = 3.0;            // -, in [0, 1e3]: besides, the scene's supports (the surface nodes inside its
+                                   // fixed regions) held by springs of this stiffness per area over E / L (0: free)
   int rounds = 2;                  // in [1, 20]: linearisations
   int iterations = 6;              // in [1, 100]: correspondence updates per round
   // The targets' uncertainty (OneShotRegistration::uncertainty); chosen on the in-silico case's
@@ -90,8 +93,8 @@ struct OneShotResult {
 
 class OneShotRegistration {
  public:
-  // Builds a model of its own from `mesh` and `scene`, free (no supports, instruments or scene
-  // loads) and held by the foundation. Throws std::invalid_argument for invalid options or a
+  // Builds a model of its own from `mesh` and `scene` without its supports, instruments or scene
+  // loads, held by the foundation (stiffer on the supports). Throws std::invalid_argument for invalid options or a
   // scene the model refuses.
   OneShotRegistration(const TetMesh& mesh, const Scene& scene, const OneShotOptions& options);
 

@@ -61,6 +61,7 @@ std::string validate(const OneShotOptions& o) {
       check(o.start_damping >= o.load_damping && o.start_damping <= 1e3, "start_damping", "in [load_damping, 1e3]",
             o.start_damping),
       check(o.foundation > 0 && o.foundation <= 10, "foundation", "in (0, 10]", o.foundation),
+      check(o.support >= 0 && o.support <= 1e3, "support", "in [0, 1e3]", o.support),
       check(o.rounds >= 1 && o.rounds <= 20, "rounds", "in [1, 20]", o.rounds),
       check(o.iterations >= 1 && o.iterations <= 100, "iterations", "in [1, 100]", o.iterations),
       check(o.posterior_scale >= 0 && std::isfinite(o.posterior_scale), "posterior_scale", ">= 0", o.posterior_scale),
@@ -91,7 +92,12 @@ OneShotRegistration::OneShotRegistration(const TetMesh& mesh, const Scene& scene
     for (int k = 1; k < 4; ++k) edges.col(k - 1) = node(X, mesh.T(e, k)) - node(X, mesh.T(e, 0));
     volume += std::abs(edges.determinant()) / 6;
   }
-  const double per_area = options.foundation * scene.parenchyma.young_modulus / std::cbrt(volume);
+  // Where the scene's supports hold it, the spring is support x E / L per area stiffer: held
+  // softly, so that the cloud may still move an attachment the segmentation placed wrongly.
+  const double unit = scene.parenchyma.young_modulus / std::cbrt(volume);
+  std::vector<char> supported(X.size() / 3, 0);
+  for (int i = 0; i < static_cast<int>(supported.size()); ++i)
+    for (const Region& r : scene.fixed) supported[i] = supported[i] || r.contains(node(X, i));
   std::vector<SurfaceTarget> foundation(X.size() / 3);
   for (int t = 0; t < F.rows(); ++t) {
     const double a = 0.5 * (node(X, F(t, 1)) - node(X, F(t, 0))).cross(node(X, F(t, 2)) - node(X, F(t, 0))).norm();
@@ -100,7 +106,7 @@ OneShotRegistration::OneShotRegistration(const TetMesh& mesh, const Scene& scene
       s.triangle = t;
       s.weights = Eigen::Vector3d::Unit(j);
       s.point = node(X, F(t, j));
-      s.stiffness += per_area * a / 3;
+      s.stiffness += (options.foundation + (supported[F(t, j)] ? options.support : 0.0)) * unit * a / 3;
     }
   }
   foundation.erase(std::remove_if(foundation.begin(), foundation.end(), [](const SurfaceTarget& s) { return s.triangle < 0; }),
