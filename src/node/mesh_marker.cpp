@@ -162,21 +162,39 @@ LabelLayout label_positions(const std::vector<Eigen::Vector3d>& anchors, const s
     for (size_t i = 0; i < anchors.size(); ++i)
       if ((anchors[i].dot(across) < middle) == (side < 0)) column.push_back(i);
     std::sort(column.begin(), column.end(), [&](size_t a, size_t b) { return anchors[a].dot(up) < anchors[b].dot(up); });
-    const double edge = side < 0 ? left - height : right + height;  // the labels' inner ends
-    double below = -INFINITY;
-    for (size_t i : column) {
-      const double height_in_view = std::max(anchors[i].dot(up), below + line);
-      below = height_in_view;
-      const Eigen::Vector3d inner = edge * across + height_in_view * up + front * toward;
-      layout.inner[i] = inner;
-      layout.at[i] = inner + side * label_half_width(texts[i], height) * across;
+    // Each label as near its anchor's height as the others let it: labels that would come closer
+    // than a line form a block, a line apart, at their anchors' mean height less their offsets in
+    // it (the least squares), merged with the block below until it is a line above that one.
+    struct Block {
+      size_t first, size;
+      double sum;  // of the anchors' heights less their offsets in the block
+      double bottom() const { return sum / size; }
+    };
+    std::vector<Block> blocks;
+    for (size_t k = 0; k < column.size(); ++k) {
+      blocks.push_back({k, 1, anchors[column[k]].dot(up)});
+      while (blocks.size() > 1) {
+        Block &below = blocks[blocks.size() - 2], &above = blocks.back();
+        if (below.bottom() + below.size * line <= above.bottom()) break;
+        below.sum += above.sum - above.size * below.size * line;
+        below.size += above.size;
+        blocks.pop_back();
+      }
     }
+    const double edge = side < 0 ? left - height : right + height;  // the labels' inner ends
+    for (const Block& b : blocks)
+      for (size_t k = b.first; k < b.first + b.size; ++k) {
+        const size_t i = column[k];
+        const Eigen::Vector3d inner = edge * across + (b.bottom() + (k - b.first) * line) * up + front * toward;
+        layout.inner[i] = inner;
+        layout.at[i] = inner + side * label_half_width(texts[i], height) * across;
+      }
   }
   return layout;
 }
 
-Eigen::AlignedBox3d append_target_names(const std::vector<TrackedTarget>& targets, const Eigen::VectorXd& organ,
-                                        const std_msgs::Header& header, visualization_msgs::MarkerArray& markers) {
+void append_target_names(const std::vector<TrackedTarget>& targets, const Eigen::VectorXd& organ,
+                         const std_msgs::Header& header, visualization_msgs::MarkerArray& markers) {
   constexpr double kHeight = 0.006;  // m, text height: readable in the package's view of a liver
   const std::vector<std::pair<size_t, std::string>> labelled = labelled_targets(targets);
   std::vector<Eigen::Vector3d> anchors;
@@ -186,9 +204,6 @@ Eigen::AlignedBox3d append_target_names(const std::vector<TrackedTarget>& target
     texts.push_back(text);
   }
   const LabelLayout layout = label_positions(anchors, texts, kHeight, organ);
-  const Eigen::Vector3d across = Eigen::Vector3d::UnitZ().cross(kViewerDirection).normalized();
-  const Eigen::Vector3d up = kViewerDirection.normalized().cross(across);
-  Eigen::AlignedBox3d taken;
   visualization_msgs::Marker leaders;
   leaders.header = header;
   leaders.ns = "target_leaders";
@@ -216,9 +231,6 @@ Eigen::AlignedBox3d append_target_names(const std::vector<TrackedTarget>& target
     m.color.a = 1.0f;
     m.text = texts[k];
     markers.markers.push_back(m);
-    for (int corner = 0; corner < 4; ++corner)
-      taken.extend(layout.at[k] + (corner & 1 ? 1 : -1) * label_half_width(texts[k], kHeight) * across +
-                   (corner & 2 ? 0.5 : -0.5) * kHeight * up);
     for (const Eigen::Vector3d& p : {anchors[k], layout.inner[k]}) {
       geometry_msgs::Point q;
       q.x = p.x();
@@ -229,13 +241,20 @@ Eigen::AlignedBox3d append_target_names(const std::vector<TrackedTarget>& target
     }
   }
   if (!leaders.points.empty()) markers.markers.push_back(leaders);
-  return taken;
 }
+
+// Where the legend and the axes go: in front of and below the model's rest box, under its middle,
+// which the package's view shows below the organ (the target labels take its sides).
+namespace {
+Eigen::Vector3d under_the_middle(const Eigen::AlignedBox3d& box) {
+  return Eigen::Vector3d(box.center().x(), box.min().y() - 0.02, box.min().z() - 0.015);
+}
+}  // namespace
 
 void append_orientation_axes(const Eigen::AlignedBox3d& box, const std_msgs::Header& header,
                              visualization_msgs::MarkerArray& markers) {
   const double length = 0.2 * box.sizes().minCoeff();
-  const Eigen::Vector3d origin(box.min().x() - 0.015, box.min().y(), box.min().z());
+  const Eigen::Vector3d origin = under_the_middle(box) - Eigen::Vector3d(0.085, 0, 0);  // left of the legend
   const char* names[3] = {"L", "P", "S"};  // LPS: +x the patient's left, +y posterior, +z superior
   for (int axis = 0; axis < 3; ++axis) {
     visualization_msgs::Marker m;
@@ -277,10 +296,9 @@ void append_orientation_axes(const Eigen::AlignedBox3d& box, const std_msgs::Hea
 
 void append_colour_legend(const Eigen::AlignedBox3d& box, double scale_max, const std_msgs::Header& header,
                           visualization_msgs::MarkerArray& markers) {
-  constexpr int kCubes = 9;  // 0, 1/8, ..., 1 of the scale: labels at 0, 1/4, 1/2, 3/4, 1
-  const double height = box.sizes().z();
-  const double cube = height / kCubes;
-  const Eigen::Vector3d base(box.max().x() + 0.015, box.min().y(), box.min().z() + 0.5 * cube);
+  constexpr int kCubes = 9;       // 0, 1/8, ..., 1 of the scale: labels at 0, 1/4, 1/2, 3/4, 1
+  constexpr double kCube = 0.01;  // m, along the bar
+  const Eigen::Vector3d base = under_the_middle(box) - Eigen::Vector3d(0.5 * (kCubes - 1) * kCube, 0, 0);
   auto marker = [&](int id, int type) {
     visualization_msgs::Marker m;
     m.header = header;
@@ -304,30 +322,28 @@ void append_colour_legend(const Eigen::AlignedBox3d& box, double scale_max, cons
   for (int k = 0; k < kCubes; ++k) {
     const double u = scale_max * k / (kCubes - 1);
     visualization_msgs::Marker m = marker(k, visualization_msgs::Marker::CUBE);
-    m.pose.position.x = base.x();
+    m.pose.position.x = base.x() + k * kCube;
     m.pose.position.y = base.y();
-    m.pose.position.z = base.z() + k * cube;
-    m.scale.x = m.scale.y = 0.6 * cube;
-    m.scale.z = cube;
+    m.pose.position.z = base.z();
+    m.scale.x = kCube;
+    m.scale.y = m.scale.z = 0.6 * kCube;
     m.color = displacement_colour(u, scale_max);
     markers.markers.push_back(m);
     if (k % 2 == 0) {
       char label[32];
       std::snprintf(label, sizeof label, k == kCubes - 1 ? ">= %.3g" : "%.3g", u * 1e3);
-      text(kCubes + k, base + Eigen::Vector3d(0.018, 0, k * cube), label);
+      text(kCubes + k, base + Eigen::Vector3d(k * kCube, 0, -0.011), label);
     }
   }
-  text(2 * kCubes, base + Eigen::Vector3d(0, 0, kCubes * cube), "displacement (mm)");
+  text(2 * kCubes, base + Eigen::Vector3d((kCubes - 0.5) * kCube + 0.03, 0, 0), "displacement (mm)");
 }
 
 void append_annotations(const std::vector<TrackedTarget>& targets, const Eigen::VectorXd& organ,
                         const Eigen::AlignedBox3d& rest, double scale_max, const std_msgs::Header& header,
                         visualization_msgs::MarkerArray& markers) {
-  const Eigen::AlignedBox3d labels = append_target_names(targets, organ, header, markers);
+  append_target_names(targets, organ, header, markers);
   append_orientation_axes(rest, header, markers);
-  Eigen::AlignedBox3d legend_beside = rest;
-  if (!labels.isEmpty()) legend_beside.max().x() = std::max(rest.max().x(), labels.max().x() + 0.015);
-  append_colour_legend(legend_beside, scale_max, header, markers);
+  append_colour_legend(rest, scale_max, header, markers);
 }
 
 }  // namespace liver_sim

@@ -63,8 +63,8 @@ struct LabelLayout {
 
 // Where labels of `height` (m) go: in a column left of the organ's silhouette (`organ`: its node
 // positions, 3 #V, m) for the anchors left of its middle, in one right of it for the others, a
-// height's gap from it; in a column, in the order of their anchors' heights in the view, each at
-// its anchor's height or a line above the label below it, whichever is higher. All lie in the
+// height's gap from it; in a column, in the order of their anchors' heights in the view, a line
+// apart or more, each as near its anchor's height as that allows. All lie in the
 // plane facing the viewer through the organ's point nearest to it: in front of the organ, and
 // scaled alike by the view's perspective, so that apart in this plane is apart on the screen.
 LabelLayout label_positions(const std::vector<Eigen::Vector3d>& anchors, const std::vector<std::string>& texts,
@@ -73,25 +73,26 @@ LabelLayout label_positions(const std::vector<Eigen::Vector3d>& anchors, const s
 // The labelled targets' labels (labelled_targets) as TEXT_VIEW_FACING markers 6 mm high placed by
 // label_positions around the organ at `organ` (namespace "target_names", id = the target's
 // index, as the target spheres, so that the spheres stay plain), and a LINE_LIST of leader lines
-// from each target to its label (namespace "target_leaders"). Returns the box the labels take.
-Eigen::AlignedBox3d append_target_names(const std::vector<TrackedTarget>& targets, const Eigen::VectorXd& organ,
+// from each target to its label (namespace "target_leaders").
+void append_target_names(const std::vector<TrackedTarget>& targets, const Eigen::VectorXd& organ,
                                         const std_msgs::Header& header, visualization_msgs::MarkerArray& markers);
 
-// The patient's axes at the -x, -y, -z corner of `box` (the model's rest bounding box, m): arrows
-// along +x, +y, +z labelled L, P, S (the model frame is LPS: the patient's left, posterior,
+// The patient's axes in front of and below `box` (the model's rest bounding box, m), left of the
+// colour legend (append_colour_legend): arrows along +x, +y, +z labelled L, P, S (the model frame is LPS: the patient's left, posterior,
 // superior); namespace "orientation".
 void append_orientation_axes(const Eigen::AlignedBox3d& box, const std_msgs::Header& header,
                              visualization_msgs::MarkerArray& markers);
 
-// The colour scale's legend beside `box` (the model's rest bounding box, m): a vertical bar of
-// cubes from 0 (bottom) to scale_max (top, m) beside the box's +x side, labelled in mm, and a
-// title; namespace "legend".
+// The colour scale's legend under `box` (the model's rest bounding box, m): a horizontal bar of
+// cubes 8 cm long from 0 (left, -x) to scale_max (right, m) in front of and below the box, under
+// its middle (where the package's view has room: the labels take its sides), labelled in mm
+// below, and a title at its right end; namespace "legend".
 void append_colour_legend(const Eigen::AlignedBox3d& box, double scale_max, const std_msgs::Header& header,
                           visualization_msgs::MarkerArray& markers);
 
 // What ~targets shows besides the target spheres: the targets' labels (append_target_names) around
-// the organ at `organ` (3 #V, m), the patient's axes beside `rest` (the model's rest bounding box,
-// m) and the colour legend to the right of the organ and of the labels.
+// the organ at `organ` (3 #V, m), the patient's axes and the colour legend by `rest` (the model's
+// rest bounding box, m).
 void append_annotations(const std::vector<TrackedTarget>& targets, const Eigen::VectorXd& organ,
                         const Eigen::AlignedBox3d& rest, double scale_max, const std_msgs::Header& header,
                         visualization_msgs::MarkerArray& markers);

@@ -162,17 +162,18 @@ TEST(MeshMarker, TargetNamesAndLegend) {
     EXPECT_EQ(m.ns, "legend");
     if (m.type == visualization_msgs::Marker::CUBE) cubes.push_back(&m);
     if (m.type == visualization_msgs::Marker::TEXT_VIEW_FACING) texts.push_back(m.text);
-    EXPECT_GT(m.pose.position.x, box.max().x());  // beside the model, not in it
+    EXPECT_LT(m.pose.position.z, box.min().z());  // under the model and in front of it, not in it
+    EXPECT_LT(m.pose.position.y, box.min().y());
   }
   ASSERT_GE(cubes.size(), 2u);
   std::set<int> ids;
   for (const visualization_msgs::Marker& m : markers.markers) ids.insert(m.id);
   EXPECT_EQ(ids.size(), markers.markers.size());
-  // Bottom: no displacement; top: the scale's end; rising in between.
+  // Left: no displacement; right: the scale's end; rising in between.
   const std_msgs::ColorRGBA still = displacement_colour(0.0, 0.008), full = displacement_colour(0.008, 0.008);
   EXPECT_TRUE(cubes.front()->color.r == still.r && cubes.front()->color.g == still.g && cubes.front()->color.b == still.b);
   EXPECT_TRUE(cubes.back()->color.r == full.r && cubes.back()->color.g == full.g && cubes.back()->color.b == full.b);
-  for (size_t k = 1; k < cubes.size(); ++k) EXPECT_GT(cubes[k]->pose.position.z, cubes[k - 1]->pose.position.z);
+  for (size_t k = 1; k < cubes.size(); ++k) EXPECT_GT(cubes[k]->pose.position.x, cubes[k - 1]->pose.position.x);
   EXPECT_NE(std::find(texts.begin(), texts.end(), "0"), texts.end());
   EXPECT_NE(std::find(texts.begin(), texts.end(), "4"), texts.end());
   EXPECT_NE(std::find(texts.begin(), texts.end(), ">= 8"), texts.end());
@@ -210,6 +211,10 @@ struct RvizView {
   }
 };
 
+Eigen::Vector3d position(const visualization_msgs::Marker& m) {
+  return Eigen::Vector3d(m.pose.position.x, m.pose.position.y, m.pose.position.z);
+}
+
 // The node's view is the rviz config's: the surface's light and the labels' layout come from its camera.
 TEST(MeshMarker, ViewerIsTheRvizConfigsCamera) {
   const RvizView view;
@@ -217,8 +222,8 @@ TEST(MeshMarker, ViewerIsTheRvizConfigsCamera) {
 }
 
 // The OR demo's liver (SOFA's liver2) and the phantom at their equilibrium, as the node shows
-// them in config/liver_sim.rviz's view: no two texts (the targets' labels, the legend's, the
-// axes' L P S) overlap on the screen, no label covers the organ, and a leader line joins each
+// them in config/liver_sim.rviz's view: every text (the targets' labels, the legend's, the axes'
+// L P S) is in the view, no two overlap on the screen, no label covers the organ, and a leader line joins each
 // label's organ-side end to its target. Checked to fail with the labels at their anchors'
 // heights without the column's spacing (line 0), and with the columns' inner ends 2 cm inside
 // the silhouette's extremes instead of a height outside them.
@@ -246,6 +251,13 @@ TEST_P(LabelsInTheRvizView, ApartOffTheOrganAndLedToTheirTargets) {
   ASSERT_NE(leaders, nullptr);
   ASSERT_EQ(leaders->points.size(), 2 * labels.size());
   ASSERT_GE(labels.size(), 4u);
+  // rviz's camera (Ogre's default) sees 45 degrees high, and 1.2 times as wide in the config's
+  // window (its render panel, beside the Displays panel, is 900 x 710 pixels in a screenshot).
+  const double half_view = std::tan(M_PI / 8);
+  const Eigen::AlignedBox2d window(Eigen::Vector2d(-1.2 * half_view, -half_view), Eigen::Vector2d(1.2 * half_view, half_view));
+  for (size_t i = 0; i < texts.size(); ++i)
+    EXPECT_TRUE(window.contains(view.text_box(*texts[i]))) << "'" << texts[i]->text << "' is out of the view at "
+                                                            << view.project(position(*texts[i])).transpose();
   for (size_t i = 0; i < texts.size(); ++i)
     for (size_t j = 0; j < i; ++j)
       EXPECT_FALSE(view.text_box(*texts[i]).intersects(view.text_box(*texts[j])))
