@@ -1,9 +1,10 @@
 #!/usr/bin/python3
-"""A headless demo of an OR session against a running liver_sim node on the liver phantom
-(launch/or_demo.launch, or scripts/run.sh, which starts both):
+"""A headless demo of an OR session against a running liver_sim node (launch/or_demo.launch, or
+scripts/run.sh, which starts both; their scene is SOFA's liver2, config/scenes/sofa_liver_or.yaml;
+any scene whose first probe is the tumour will do):
 
   0 s   a depth camera in front of and above the liver sends clouds at 5 Hz until the end: the
-        liver in the abdomen lies up to 3 mm higher over the right lobe than the pre-operative
+        liver in the abdomen lies up to 3 mm higher over the tumour's lobe than the pre-operative
         model (a smooth lift), and the node registers the clouds;
   6 s   a grasper closes on the right lobe's lateral edge and lifts it 15 mm (a retraction);
   13 s  a probe presses 5 mm into the right lobe above the tumour, slides 10 mm, withdraws;
@@ -181,10 +182,19 @@ class Session:
 
 
 def surface_height(triangles, xy):
-    """Height (m) of the upper surface above the point xy: the highest vertex within 6 mm."""
-    v = triangles.reshape(-1, 3)
-    near = np.linalg.norm(v[:, :2] - xy, axis=1) < 0.006
-    return v[near, 2].max()
+    """Height (m) of the upper surface above the point xy: the highest crossing of the vertical
+    line through xy with a triangle (barycentric coordinates of xy in the triangles' xy shadow)."""
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    e1, e2, r = b[:, :2] - a[:, :2], c[:, :2] - a[:, :2], np.asarray(xy) - a[:, :2]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    ok = np.abs(det) > 1e-15
+    det = np.where(ok, det, 1.0)
+    u = (r[:, 0] * e2[:, 1] - r[:, 1] * e2[:, 0]) / det
+    v = (e1[:, 0] * r[:, 1] - e1[:, 1] * r[:, 0]) / det
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1)
+    if not hit.any():
+        sys.exit(f"or_demo: no surface above ({xy[0] * 1e3:.0f}, {xy[1] * 1e3:.0f}) mm")
+    return float(((1 - u - v) * a[:, 2] + u * b[:, 2] + v * c[:, 2])[hit].max())
 
 
 def main():
@@ -221,8 +231,8 @@ def main():
     preop = session.triangles()
     # The right lobe holds the tumour: its side of the model frame's x (the patient's right).
     side = 1.0 if tumour_preop[0] > 0 else -1.0
-    # The intra-operative liver the camera sees: up to 3 mm higher over the right lobe.
-    lift = 3e-3 * np.exp(-np.sum((preop[..., :2] - [side * 0.06, -0.03]) ** 2, axis=-1) / (2 * 0.04**2))
+    # The intra-operative liver the camera sees: up to 3 mm higher over the tumour.
+    lift = 3e-3 * np.exp(-np.sum((preop[..., :2] - tumour_preop[:2]) ** 2, axis=-1) / (2 * 0.04**2))
     truth = preop.copy()
     truth[..., 2] += lift
     camera = Camera(truth, rng)

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <numeric>
+#include <set>
 
 namespace liver_sim {
 
@@ -23,7 +24,9 @@ std_msgs::ColorRGBA displacement_colour(double u, double scale_max) {
   return c;
 }
 
-const Eigen::Vector3d kLightDirection = Eigen::Vector3d(0.24, -0.82, 0.52).normalized();
+// rviz's orbit view puts its camera at (cos yaw cos pitch, sin yaw cos pitch, sin pitch) from its
+// focal point: config/liver_sim.rviz's Yaw 5.0 and Pitch 0.55.
+const Eigen::Vector3d kViewerDirection(std::cos(5.0) * std::cos(0.55), std::sin(5.0) * std::cos(0.55), std::sin(0.55));
 
 Eigen::MatrixX3d vertex_normals(const Eigen::MatrixX3i& F, const Eigen::VectorXd& x) {
   Eigen::MatrixX3d n = Eigen::MatrixX3d::Zero(x.size() / 3, 3);
@@ -55,7 +58,7 @@ void fill_mesh_marker(const LiverModel& model, const Eigen::VectorXd& reference,
     // Farthest from the viewer first: a translucent marker's triangles are blended in order.
     std::vector<double> depth(F.rows());
     for (int f = 0; f < F.rows(); ++f)
-      depth[f] = (x.segment<3>(3 * F(f, 0)) + x.segment<3>(3 * F(f, 1)) + x.segment<3>(3 * F(f, 2))).dot(kLightDirection);
+      depth[f] = (x.segment<3>(3 * F(f, 0)) + x.segment<3>(3 * F(f, 1)) + x.segment<3>(3 * F(f, 2))).dot(kViewerDirection);
     std::sort(order.begin(), order.end(), [&](int a, int b) { return depth[a] < depth[b]; });
   }
   marker.points.resize(3 * F.rows());
@@ -70,7 +73,7 @@ void fill_mesh_marker(const LiverModel& model, const Eigen::VectorXd& reference,
       std_msgs::ColorRGBA& c = marker.colors[3 * i + k];
       c = displacement_colour((x.segment<3>(3 * node) - reference.segment<3>(3 * node)).norm(), scale_max);
       const float light =
-          static_cast<float>(kAmbient + (1 - kAmbient) * std::max(0.0, normals.row(node).dot(kLightDirection)));
+          static_cast<float>(kAmbient + (1 - kAmbient) * std::max(0.0, normals.row(node).dot(kViewerDirection)));
       c.r *= light;
       c.g *= light;
       c.b *= light;
@@ -114,74 +117,144 @@ std::string target_label(const TrackedTarget& target) {
          (number == std::string::npos ? target.name : target.name.substr(number + 1));
 }
 
-std::vector<Eigen::Vector3d> label_positions(const std::vector<Eigen::Vector3d>& anchors,
-                                             const std::vector<std::string>& texts, double height) {
-  // Text of TEXT_VIEW_FACING markers is about 0.6 of its height wide per character; a label
-  // keeps a fifth of its height free around it.
-  auto half_width = [&](size_t i) { return 0.3 * height * texts[i].size() + 0.1 * height; };
-  std::vector<size_t> order(anchors.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return anchors[a].z() < anchors[b].z(); });
-  std::vector<Eigen::Vector3d> at(anchors.size());
-  const double line = 1.2 * height;
-  // Overlap in z is tested against exactly the height a raise sets (z_j + line), so that a label
-  // raised above j no longer meets j: every raise lifts it strictly, to one of finitely many heights.
-  auto overlaps = [&](size_t i, size_t j) {
-    return std::abs(at[i].x() - at[j].x()) < half_width(i) + half_width(j) && at[i].z() < at[j].z() + line &&
-           at[j].z() < at[i].z() + line;
-  };
-  std::vector<size_t> placed;
-  for (size_t i : order) {
-    at[i] = anchors[i] + Eigen::Vector3d(0, 0, height);
-    for (bool moved = true; moved;) {
-      moved = false;
-      for (size_t j : placed)
-        if (overlaps(i, j)) {
-          at[i].z() = at[j].z() + line;
-          moved = true;
-        }
+std::vector<std::pair<size_t, std::string>> labelled_targets(const std::vector<TrackedTarget>& targets) {
+  const std::string centre = "_centre";
+  std::set<std::string> stems;  // of the probes named <stem>_centre
+  for (const TrackedTarget& t : targets)
+    if (t.kind == TrackedTarget::Kind::Probe && t.name.size() > centre.size() &&
+        t.name.compare(t.name.size() - centre.size(), centre.size(), centre) == 0)
+      stems.insert(t.name.substr(0, t.name.size() - centre.size()));
+  std::vector<std::pair<size_t, std::string>> out;
+  for (size_t i = 0; i < targets.size(); ++i) {
+    const TrackedTarget& t = targets[i];
+    const size_t underscore = t.name.rfind('_');
+    const std::string stem = underscore == std::string::npos ? "" : t.name.substr(0, underscore);
+    if (t.kind == TrackedTarget::Kind::Probe && stems.count(stem)) {
+      if (t.name == stem + centre) out.emplace_back(i, stem);
+    } else {
+      out.emplace_back(i, target_label(t));
     }
-    placed.push_back(i);
   }
-  return at;
+  return out;
 }
 
-void append_target_names(const std::vector<TrackedTarget>& targets, const std_msgs::Header& header,
-                         visualization_msgs::MarkerArray& markers) {
+double label_half_width(const std::string& text, double height) { return 0.3 * height * text.size() + 0.1 * height; }
+
+LabelLayout label_positions(const std::vector<Eigen::Vector3d>& anchors, const std::vector<std::string>& texts,
+                            double height, const Eigen::VectorXd& organ) {
+  // The view's axes: across (right on the screen), up, and toward the viewer.
+  const Eigen::Vector3d toward = kViewerDirection.normalized();
+  const Eigen::Vector3d across = Eigen::Vector3d::UnitZ().cross(toward).normalized();
+  const Eigen::Vector3d up = toward.cross(across);
+  double left = INFINITY, right = -INFINITY, front = -INFINITY;
+  for (int i = 0; i + 2 < organ.size(); i += 3) {
+    const Eigen::Vector3d p = organ.segment<3>(i);
+    left = std::min(left, p.dot(across));
+    right = std::max(right, p.dot(across));
+    front = std::max(front, p.dot(toward));
+  }
+  const double middle = 0.5 * (left + right), line = 1.3 * height;
+  LabelLayout layout;
+  layout.at.resize(anchors.size());
+  layout.inner.resize(anchors.size());
+  for (int side : {-1, 1}) {
+    std::vector<size_t> column;
+    for (size_t i = 0; i < anchors.size(); ++i)
+      if ((anchors[i].dot(across) < middle) == (side < 0)) column.push_back(i);
+    std::sort(column.begin(), column.end(), [&](size_t a, size_t b) { return anchors[a].dot(up) < anchors[b].dot(up); });
+    // Each label as near its anchor's height as the others let it: labels that would come closer
+    // than a line form a block, a line apart, at their anchors' mean height less their offsets in
+    // it (the least squares), merged with the block below until it is a line above that one.
+    struct Block {
+      size_t first, size;
+      double sum;  // of the anchors' heights less their offsets in the block
+      double bottom() const { return sum / size; }
+    };
+    std::vector<Block> blocks;
+    for (size_t k = 0; k < column.size(); ++k) {
+      blocks.push_back({k, 1, anchors[column[k]].dot(up)});
+      while (blocks.size() > 1) {
+        Block &below = blocks[blocks.size() - 2], &above = blocks.back();
+        if (below.bottom() + below.size * line <= above.bottom()) break;
+        below.sum += above.sum - above.size * below.size * line;
+        below.size += above.size;
+        blocks.pop_back();
+      }
+    }
+    const double edge = side < 0 ? left - height : right + height;  // the labels' inner ends
+    for (const Block& b : blocks)
+      for (size_t k = b.first; k < b.first + b.size; ++k) {
+        const size_t i = column[k];
+        const Eigen::Vector3d inner = edge * across + (b.bottom() + (k - b.first) * line) * up + front * toward;
+        layout.inner[i] = inner;
+        layout.at[i] = inner + side * label_half_width(texts[i], height) * across;
+      }
+  }
+  return layout;
+}
+
+void append_target_names(const std::vector<TrackedTarget>& targets, const Eigen::VectorXd& organ,
+                         const std_msgs::Header& header, visualization_msgs::MarkerArray& markers) {
   constexpr double kHeight = 0.006;  // m, text height: readable in the package's view of a liver
+  const std::vector<std::pair<size_t, std::string>> labelled = labelled_targets(targets);
   std::vector<Eigen::Vector3d> anchors;
   std::vector<std::string> texts;
-  for (const TrackedTarget& t : targets) {
-    anchors.push_back(t.position);
-    texts.push_back(target_label(t));
+  for (const auto& [index, text] : labelled) {
+    anchors.push_back(targets[index].position);
+    texts.push_back(text);
   }
-  const std::vector<Eigen::Vector3d> at = label_positions(anchors, texts, kHeight);
-  for (size_t i = 0; i < targets.size(); ++i) {
+  const LabelLayout layout = label_positions(anchors, texts, kHeight, organ);
+  visualization_msgs::Marker leaders;
+  leaders.header = header;
+  leaders.ns = "target_leaders";
+  leaders.type = visualization_msgs::Marker::LINE_LIST;
+  leaders.action = visualization_msgs::Marker::ADD;
+  leaders.pose.orientation.w = 1;
+  leaders.scale.x = 0.0005;  // m, line width
+  leaders.color.a = 1.0f;
+  for (size_t k = 0; k < labelled.size(); ++k) {
     visualization_msgs::Marker m;
     m.header = header;
     m.ns = "target_names";
-    m.id = static_cast<int>(i);
+    m.id = static_cast<int>(labelled[k].first);
     m.type = visualization_msgs::Marker::TEXT_VIEW_FACING;
     m.action = visualization_msgs::Marker::ADD;
-    m.pose.position.x = at[i].x();
-    m.pose.position.y = at[i].y();
-    m.pose.position.z = at[i].z();
+    m.pose.position.x = layout.at[k].x();
+    m.pose.position.y = layout.at[k].y();
+    m.pose.position.z = layout.at[k].z();
     m.pose.orientation.w = 1;
     m.scale.z = kHeight;
-    const bool vessel = targets[i].kind == TrackedTarget::Kind::Bifurcation;
+    const bool vessel = targets[labelled[k].first].kind == TrackedTarget::Kind::Bifurcation;
     m.color.r = vessel ? 0.75f : 1.0f;  // the targets' hues, lightened: bifurcations blue, probes red
     m.color.g = vessel ? 0.8f : 0.7f;
     m.color.b = vessel ? 1.0f : 0.7f;
     m.color.a = 1.0f;
-    m.text = texts[i];
+    m.text = texts[k];
     markers.markers.push_back(m);
+    for (const Eigen::Vector3d& p : {anchors[k], layout.inner[k]}) {
+      geometry_msgs::Point q;
+      q.x = p.x();
+      q.y = p.y();
+      q.z = p.z();
+      leaders.points.push_back(q);
+      leaders.colors.push_back(m.color);
+    }
   }
+  if (!leaders.points.empty()) markers.markers.push_back(leaders);
 }
+
+// Where the legend and the axes go: in front of and below the model's rest box, under its middle,
+// which the package's view shows below the organ (the target labels take its sides).
+namespace {
+Eigen::Vector3d under_the_middle(const Eigen::AlignedBox3d& box) {
+  return Eigen::Vector3d(box.center().x(), box.min().y() - 0.02, box.min().z() - 0.015);
+}
+}  // namespace
 
 void append_orientation_axes(const Eigen::AlignedBox3d& box, const std_msgs::Header& header,
                              visualization_msgs::MarkerArray& markers) {
   const double length = 0.2 * box.sizes().minCoeff();
-  const Eigen::Vector3d origin(box.min().x() - 0.015, box.min().y(), box.min().z());
+  const Eigen::Vector3d origin = under_the_middle(box) - Eigen::Vector3d(0.085, 0, 0);  // left of the legend
   const char* names[3] = {"L", "P", "S"};  // LPS: +x the patient's left, +y posterior, +z superior
   for (int axis = 0; axis < 3; ++axis) {
     visualization_msgs::Marker m;
@@ -223,10 +296,9 @@ void append_orientation_axes(const Eigen::AlignedBox3d& box, const std_msgs::Hea
 
 void append_colour_legend(const Eigen::AlignedBox3d& box, double scale_max, const std_msgs::Header& header,
                           visualization_msgs::MarkerArray& markers) {
-  constexpr int kCubes = 9;  // 0, 1/8, ..., 1 of the scale: labels at 0, 1/4, 1/2, 3/4, 1
-  const double height = box.sizes().z();
-  const double cube = height / kCubes;
-  const Eigen::Vector3d base(box.max().x() + 0.015, box.min().y(), box.min().z() + 0.5 * cube);
+  constexpr int kCubes = 9;       // 0, 1/8, ..., 1 of the scale: labels at 0, 1/4, 1/2, 3/4, 1
+  constexpr double kCube = 0.01;  // m, along the bar
+  const Eigen::Vector3d base = under_the_middle(box) - Eigen::Vector3d(0.5 * (kCubes - 1) * kCube, 0, 0);
   auto marker = [&](int id, int type) {
     visualization_msgs::Marker m;
     m.header = header;
@@ -250,20 +322,28 @@ void append_colour_legend(const Eigen::AlignedBox3d& box, double scale_max, cons
   for (int k = 0; k < kCubes; ++k) {
     const double u = scale_max * k / (kCubes - 1);
     visualization_msgs::Marker m = marker(k, visualization_msgs::Marker::CUBE);
-    m.pose.position.x = base.x();
+    m.pose.position.x = base.x() + k * kCube;
     m.pose.position.y = base.y();
-    m.pose.position.z = base.z() + k * cube;
-    m.scale.x = m.scale.y = 0.6 * cube;
-    m.scale.z = cube;
+    m.pose.position.z = base.z();
+    m.scale.x = kCube;
+    m.scale.y = m.scale.z = 0.6 * kCube;
     m.color = displacement_colour(u, scale_max);
     markers.markers.push_back(m);
     if (k % 2 == 0) {
       char label[32];
       std::snprintf(label, sizeof label, k == kCubes - 1 ? ">= %.3g" : "%.3g", u * 1e3);
-      text(kCubes + k, base + Eigen::Vector3d(0.018, 0, k * cube), label);
+      text(kCubes + k, base + Eigen::Vector3d(k * kCube, 0, -0.011), label);
     }
   }
-  text(2 * kCubes, base + Eigen::Vector3d(0, 0, kCubes * cube), "displacement (mm)");
+  text(2 * kCubes, base + Eigen::Vector3d((kCubes - 0.5) * kCube + 0.03, 0, 0), "displacement (mm)");
+}
+
+void append_annotations(const std::vector<TrackedTarget>& targets, const Eigen::VectorXd& organ,
+                        const Eigen::AlignedBox3d& rest, double scale_max, const std_msgs::Header& header,
+                        visualization_msgs::MarkerArray& markers) {
+  append_target_names(targets, organ, header, markers);
+  append_orientation_axes(rest, header, markers);
+  append_colour_legend(rest, scale_max, header, markers);
 }
 
 }  // namespace liver_sim

@@ -65,7 +65,8 @@ bool ScenePublisher::publish() {
 // The tumour probes and vessel bifurcations where the model has them now: spheres (tumour red,
 // bifurcations blue; namespace "probes" or "bifurcations", id = the target's index, as in the
 // poses) and their poses (orientation: identity); their names in markers of their own (rviz flags
-// text on a sphere) and the colour legend; with an analysis, their covariances and 95% ellipsoids.
+// text on a sphere), off the organ with leader lines, the patient's axes and the colour legend
+// (append_annotations); with an analysis, their covariances and 95% ellipsoids.
 void ScenePublisher::publish_targets(const std_msgs::Header& header) {
   const LiverModel& model = session_.model();
   const std::vector<TrackedTarget> targets = tracked_targets(model);
@@ -89,11 +90,9 @@ void ScenePublisher::publish_targets(const std_msgs::Header& header) {
     markers.markers.push_back(m);
     poses.poses.push_back(m.pose);
   }
-  append_target_names(targets, header, markers);
   const Eigen::MatrixX3d& rest = model.mesh().V;
   const Eigen::AlignedBox3d box(rest.colwise().minCoeff().transpose(), rest.colwise().maxCoeff().transpose());
-  append_colour_legend(box, color_scale_max_, header, markers);
-  append_orientation_axes(box, header, markers);
+  append_annotations(targets, model.positions(), box, color_scale_max_, header, markers);
   target_marker_pub_.publish(markers);
   target_pose_pub_.publish(poses);
   const std::vector<TargetUncertainty::Covariance>& covariances = session_.covariances();
