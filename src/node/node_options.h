@@ -26,7 +26,7 @@ struct NodeOptions {
   std::vector<std::string> scene_overrides;
   int threads = -1;                   // [1, WorkerPool::kMaxThreads]; -1 (unset): the scene's
   double uncertainty_period = 1.0;    // s, >= 0
-  bool one_shot = true;               // the first cloud (and one far from the model) registered in one shot
+  bool one_shot = false;              // the first cloud (and one far from the model) registered in one shot
   double cloud_margin = 0.05;         // m, >= 0
   double instrument_radius = 0.003;   // m: the tool's and the frames' instruments
   double instrument_length = 0.1;     // m
