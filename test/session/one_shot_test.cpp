@@ -59,6 +59,14 @@ struct FarCloud {
   }
 };
 
+// The tests' session: the analysis in the frame, the one-shot registration on.
+SessionOptions one_shot_options() {
+  SessionOptions o;
+  o.analysis = RegistrationAnalysis::Placement::InFrame;
+  o.one_shot = OneShotOptions();
+  return o;
+}
+
 // Frames until the session is idle or `frames` have run.
 void settle(TrackingSession& s, int frames) {
   for (int i = 0; i < frames && s.advance().converging; ++i) {
@@ -72,10 +80,7 @@ TEST(OneShotSession, AFarDeformedFirstCloudIsRegisteredOffTheFrameThread) {
   // the same cloud. Mutation seen failing: the one-shot's result dropped (adopt_one_shot
   // registering the cloud with the tracker instead): the error is the tracker's.
   FarCloud far;
-  SessionOptions o;
-  o.analysis = RegistrationAnalysis::Placement::InFrame;
-  o.one_shot = OneShotOptions();
-  TrackingSession session(far.mesh, far.scene, o);
+  TrackingSession session(far.mesh, far.scene, one_shot_options());
   settle(session, 50);  // the scene's own equilibrium first
   session.submit(far.cloud);
   FrameReport report = session.advance();
@@ -115,10 +120,7 @@ TEST(OneShotSession, AFirstCloudOfTheSceneItselfLeavesTheModelWhereItIs) {
   // the solve started from the rest mesh (no set_reference): the sag taken for a rigid motion
   // of 11 mm and the targets 16 mm off in the node's registration test.
   FarCloud far;
-  SessionOptions o;
-  o.analysis = RegistrationAnalysis::Placement::InFrame;
-  o.one_shot = OneShotOptions();
-  TrackingSession session(far.mesh, far.scene, o);
+  TrackingSession session(far.mesh, far.scene, one_shot_options());
   settle(session, 50);
   const Eigen::VectorXd equilibrium = session.model().positions();
   const Eigen::VectorXd rest = LiverModel(far.mesh, far.scene).positions();
@@ -150,10 +152,7 @@ TEST(OneShotSession, AFirstCloudTooSmallToTrackIsRefusedAndTheNextOneSolved) {
   // the one-shot still waits for a cloud. Mutation seen failing: the check left out (the
   // handful started a one-shot solve).
   FarCloud far;
-  SessionOptions o;
-  o.analysis = RegistrationAnalysis::Placement::InFrame;
-  o.one_shot = OneShotOptions();
-  TrackingSession session(far.mesh, far.scene, o);
+  TrackingSession session(far.mesh, far.scene, one_shot_options());
   Cloud few;
   const int min_points = far.scene.registration.min_points;
   for (int i = 0; i < min_points - 1; ++i) few.points.push_back(far.cloud.points[i * far.cloud.points.size() / min_points]);
@@ -168,10 +167,7 @@ TEST(OneShotSession, AResetCallsForAnotherOneShot) {
   // After a reset the next cloud starts a one-shot registration again; the clouds that come
   // while one runs wait for it (none registered before it is adopted).
   FarCloud far;
-  SessionOptions o;
-  o.analysis = RegistrationAnalysis::Placement::InFrame;
-  o.one_shot = OneShotOptions();
-  TrackingSession session(far.mesh, far.scene, o);
+  TrackingSession session(far.mesh, far.scene, one_shot_options());
   session.submit(far.cloud);
   EXPECT_EQ(session.advance().one_shot, FrameReport::OneShot::Started);
   while (session.advance().one_shot != FrameReport::OneShot::Adopted)
