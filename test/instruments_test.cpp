@@ -220,7 +220,7 @@ TEST(Instruments, GrasperAndProbeFromTheirOwnFramesMatchTheCore) {
   EXPECT_GT(model.instrument_reaction(kp).force.norm(), 1e-3) << "the probe presses";
   int adds = 0;
   for (const auto& m : markers.markers) adds += m.action == visualization_msgs::Marker::ADD;
-  EXPECT_EQ(adds, 3 + 1) << "a grasper's two jaws and rod, a probe's sphere";
+  EXPECT_EQ(adds, 4 + 1) << "a grasper's two jaws, hinge pin and shaft, a probe's sphere";
 
   // Close, lift 2 mm, open: the tissue hangs on the jaws, then lets go.
   struct Stage {

@@ -25,7 +25,7 @@ void paint(InstrumentPart::Role role, std_msgs::ColorRGBA& c) {
     case InstrumentPart::Role::Body: break;
     case InstrumentPart::Role::Wall: grey = 0.8f, c.a = 0.5f; break;
     case InstrumentPart::Role::Lumen: grey = 0.2f; break;
-    case InstrumentPart::Role::Jaw: grey = 0.55f; break;
+    case InstrumentPart::Role::Jaw: grey = 0.6f; break;
   }
   c.r = c.g = grey;
   c.b = grey + 0.05f;

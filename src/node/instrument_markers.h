@@ -1,7 +1,7 @@
 // The instruments as rviz markers (namespace "instruments"), each as what it is, from its tip pose
 // P (+z back along it): a probe's sphere, a shaft's rounded rod, a tube's wall around its darker
-// lumen, a grasper's two jaws (apart when open) on its rod. Instruments out of the scene are not
-// drawn; the array starts by deleting the last one's markers.
+// lumen, a grasper's shaft with two darker jaws on a hinge pin at its end (apart when open).
+// Instruments out of the scene are not drawn; the array starts by deleting the last one's markers.
 #pragma once
 
 #include <std_msgs/Header.h>

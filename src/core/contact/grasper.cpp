@@ -2,10 +2,28 @@
 // (bilateral contacts); it pushes nothing.
 #include <cmath>
 
+#include "liver_sim/contact/grasper_jaws.h"
 #include "liver_sim/contact/instrument_slot.h"
 #include "shapes.h"
 
 namespace liver_sim {
+
+// A 5 mm laparoscopic grasper at a hold radius of 3 mm: jaws 18 mm long, each 1.5 mm thick,
+// opened 30 degrees each way (their ends 19 mm apart); shut, centred on the tip, the hold's
+// sphere lies between them.
+GrasperJaws grasper_jaws(const InstrumentOptions& o) {
+  const double r = o.radius;
+  GrasperJaws j;
+  j.hinge = 3 * r;
+  j.length = 6 * r;
+  j.thickness = 0.5 * r;
+  j.width = 1.2 * r;
+  j.opening = o.closed ? 0.0 : 30.0 * M_PI / 180.0;
+  j.shaft_diameter = 1.6 * r;
+  j.pin_diameter = 0.8 * r;
+  return j;
+}
+
 namespace {
 
 class Grasper final : public InstrumentShape {
@@ -44,19 +62,21 @@ class Grasper final : public InstrumentShape {
   }
 
   void draw(const InstrumentOptions& o, const Eigen::Isometry3d& pose, std::vector<InstrumentPart>& parts) const override {
-    // Two jaws four hold radii long and wider than the rod, hinged at its end and centred on
-    // the tip (the hold point), tilted 25 degrees apart when open: a viewer sees a grasper, not
-    // a rod.
-    const double r = o.radius, tilt = o.closed ? 0.0 : 25.0 * M_PI / 180.0;
+    const GrasperJaws j = grasper_jaws(o);
+    const Eigen::Isometry3d hinge = pose * Eigen::Translation3d(0, 0, j.hinge);
     for (int side : {-1, 1}) {
-      const Eigen::Isometry3d jaw = pose * Eigen::Translation3d(0, 0, 2 * r) *
-                                    Eigen::AngleAxisd(side * tilt, Eigen::Vector3d::UnitY()) *
-                                    Eigen::Translation3d(side * 0.3 * r, 0, -2 * r);
-      parts.push_back(
-          part(InstrumentPart::Primitive::Box, jaw, Eigen::Vector3d(0.4 * r, 1.4 * r, 4 * r), InstrumentPart::Role::Jaw));
+      // Turned about -y by side * opening, the jaw's -z runs to side * x; its inner face on the
+      // axis, so that shut jaws lie side by side.
+      const Eigen::Isometry3d jaw = hinge * Eigen::AngleAxisd(-side * j.opening, Eigen::Vector3d::UnitY()) *
+                                    Eigen::Translation3d(side * 0.5 * j.thickness, 0, -0.5 * j.length);
+      parts.push_back(part(InstrumentPart::Primitive::Box, jaw, Eigen::Vector3d(j.thickness, j.width, j.length),
+                           InstrumentPart::Role::Jaw));
     }
-    parts.push_back(part(InstrumentPart::Primitive::Cylinder, pose * Eigen::Translation3d(0, 0, 2 * r + 0.5 * o.length),
-                         Eigen::Vector3d(0.8 * r, 0.8 * r, o.length), InstrumentPart::Role::Body));
+    parts.push_back(part(InstrumentPart::Primitive::Cylinder, hinge * Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitX()),
+                         Eigen::Vector3d(j.pin_diameter, j.pin_diameter, j.width + j.pin_diameter),
+                         InstrumentPart::Role::Body));
+    parts.push_back(part(InstrumentPart::Primitive::Cylinder, hinge * Eigen::Translation3d(0, 0, 0.5 * o.length),
+                         Eigen::Vector3d(j.shaft_diameter, j.shaft_diameter, o.length), InstrumentPart::Role::Body));
   }
 
  private:
