@@ -20,6 +20,20 @@ namespace {
 // A probe (4 mm) lowered 2 mm onto a 20 mm block and pressed 1.5 mm into it within `press_time`
 // (s), then held: dynamic steps of 10 ms, mass-proportional damping.
 constexpr double kBlock = 0.02;
+
+// A probe of radius r over the block's top at x = x0, `above` it, pressed `depth` into it by
+// press_time, then swept along x to x1 at `speed` (m, s, m/s).
+InstrumentOptions swept_probe(double r, double above, double depth, double press_time, double x0, double x1,
+                              double speed) {
+  InstrumentOptions p = probe("probe", Eigen::Vector3d::Zero(), r);
+  for (double t : {0.0, press_time, press_time + std::abs(x1 - x0) / speed}) {
+    InstrumentOptions::Keyframe f;
+    f.t = t;
+    f.position = Eigen::Vector3d(t <= press_time ? x0 : x1, kBlock / 2, kBlock + r - (t == 0 ? -above : depth));
+    p.trajectory.push_back(f);
+  }
+  return p;
+}
 Scene dynamic_press(double press_time) {
   const double r = 0.004;
   Scene s = block_scene(3000, 0.45, 0.3);
@@ -137,14 +151,7 @@ TEST(Probe, HoveringProbeKeepsModifiedNewtonsFactor) {
 TEST(Probe, AFactorServesTheIterationAfterTheOneThatMadeIt) {
   const double r = 0.002, depth = 0.001, speed = 0.02;  // m, m, m/s
   Scene s = block_scene(3000, 0.45, 0.3);
-  InstrumentOptions p = probe("probe", Eigen::Vector3d::Zero(), r);
-  for (double t : {0.0, 0.1, 0.1 + 0.012 / speed}) {  // lowered 2 mm, then swept along x
-    InstrumentOptions::Keyframe f;
-    f.t = t;
-    f.position = Eigen::Vector3d(t <= 0.1 ? 0.004 : 0.016, kBlock / 2, kBlock + r - (t == 0 ? -0.001 : depth));
-    p.trajectory.push_back(f);
-  }
-  s.instruments.push_back(p);
+  s.instruments.push_back(swept_probe(r, 0.001, depth, 0.1, 0.004, 0.016, speed));  // lowered 2 mm, swept 12 mm
   s.solver.mode = SolverOptions::Mode::Dynamic;
   s.solver.dt = 0.01;
   s.solver.rayleigh_mass = 20;
@@ -191,14 +198,7 @@ TEST(Probe, DampedHapticFramesCloseNewGaps) {
   const double r = 0.002, depth = 0.001, speed = 0.03;  // m, m, m/s
   Scene s = block_scene(3500, 0.45, 0.3);
   s.capsule.enabled = true;
-  InstrumentOptions p = probe("probe", Eigen::Vector3d::Zero(), r);
-  for (double t : {0.0, 0.03, 0.03 + 0.008 / speed}) {  // lowered 1.5 mm, then swept 8 mm along x
-    InstrumentOptions::Keyframe f;
-    f.t = t;
-    f.position = Eigen::Vector3d(t <= 0.03 ? 0.006 : 0.014, kBlock / 2, kBlock + r - (t == 0 ? -0.0005 : depth));
-    p.trajectory.push_back(f);
-  }
-  s.instruments.push_back(p);
+  s.instruments.push_back(swept_probe(r, 0.0005, depth, 0.03, 0.006, 0.014, speed));  // lowered 1.5 mm, swept 8 mm
   s.solver.mode = SolverOptions::Mode::Dynamic;
   s.solver.dt = 0.001;
   s.solver.rayleigh_stiffness = 0.02;
@@ -238,14 +238,7 @@ TEST(Probe, DampedHapticFramesCloseNewGaps) {
 TEST(Probe, TheContactForcesTurningIsInTheNewtonMatrix) {
   const double r = 0.004, depth = 0.003, speed = 0.03;  // m, m, m/s
   Scene s = block_scene(3000, 0.45, 0.0);
-  InstrumentOptions p = probe("probe", Eigen::Vector3d::Zero(), r);
-  for (double t : {0.0, 0.2, 0.2 + 0.008 / speed}) {  // lowered 3.5 mm, then swept 8 mm along x
-    InstrumentOptions::Keyframe f;
-    f.t = t;
-    f.position = Eigen::Vector3d(t <= 0.2 ? 0.006 : 0.014, kBlock / 2, kBlock + r - (t == 0 ? -0.0005 : depth));
-    p.trajectory.push_back(f);
-  }
-  s.instruments.push_back(p);
+  s.instruments.push_back(swept_probe(r, 0.0005, depth, 0.2, 0.006, 0.014, speed));  // lowered 3.5 mm, swept 8 mm
   s.solver.mode = SolverOptions::Mode::Dynamic;
   s.solver.dt = 0.033;
   s.solver.rayleigh_mass = 20;
