@@ -24,8 +24,10 @@ from sensor_msgs import point_cloud2
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
+from liver_sim.msg import SimulationStatus
+
 sys.path.insert(0, os.path.dirname(os.path.realpath(__file__)))
-from or_demo import FRAME, Camera, Instrument, Session, surface_height  # noqa: E402
+from or_demo import FRAME, NODE, Camera, Instrument, Session, surface_height  # noqa: E402
 
 POSE_RATE = 30.0     # Hz
 PRESS = (0.002, 0.006)  # m below the surface: the press goes between these
@@ -90,6 +92,8 @@ def main():
     next_pose, next_cloud = start, start
     with session.lock:
         step0 = session.status.step
+    statuses = []  # (state, text) of every ~status while the probe moves
+    rospy.Subscriber(f"{NODE}/status", SimulationStatus, lambda m: statuses.append((m.state, m.text)), queue_size=100)
     while time.time() < start + args.duration and not rospy.is_shutdown():
         now = time.time()
         if now >= next_pose:
@@ -125,6 +129,8 @@ def main():
         "meshes_per_s": round(len(moving) / (end - start), 2),
         "frames_per_s": round(steps / (end - start), 2),
         "inputs_sent": len(sent),
+        "status": {"messages": len(statuses), "iteration_cap": sum("iteration cap" in t for _, t in statuses),
+                   "states": {w: sum(s == w for s, _ in statuses) for w in sorted({s for s, _ in statuses})}},
         "latency_ms": {"median": round(float(np.median(lat)), 1), "p95": round(float(np.percentile(lat, 95)), 1),
                        "max": round(float(lat.max()), 1)} if len(lat) else None,
     }

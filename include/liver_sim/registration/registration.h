@@ -80,8 +80,9 @@ class SurfaceRegistration {
   // (built from the same mesh and scene as the model) finds the rigid motion and the surface
   // loads from the rest shape, starting from the current alignment. The registration then
   // starts again from there (clear(), then): the model takes the registered shape, held there by
-  // the loads that hold it (its internal forces less the scene's loads at that shape; its
-  // supports stay where the shape put them), the rigid motion becomes the alignment applied to
+  // the loads that hold it (its internal forces less the scene's loads at that shape and less
+  // the instruments' forces at the model's state, the one-shot's reference; its supports stay
+  // where the shape put them), the rigid motion becomes the alignment applied to
   // every cloud, and the cloud is registered as by register_cloud, so that tracking goes on.
   // Throws std::invalid_argument, with nothing changed, for a cloud the one-shot registration
   // refuses (one_shot.h) or a one-shot registration of another mesh; a refusal of the cloud by
@@ -95,8 +96,13 @@ class SurfaceRegistration {
   // The hand-over alone, of a one-shot result found elsewhere (another thread, from the
   // alignment in force when it started) for `cloud`: what register_one_shot does after the
   // solve. Throws std::invalid_argument, with nothing changed, for a result of another mesh.
+  // `instrument_forces`: the instruments' contact forces on the tissue (per DOF, N; empty: none)
+  // at the shape the solve started from (OneShotRegistration::set_reference), which that shape
+  // and so the result carry: the loads holding the shape leave them out, since the instruments
+  // in the model press by themselves (where they are now, not where they were).
   RegistrationFrame adopt_one_shot(const OneShotResult& result, const pcl::PointCloud<pcl::PointXYZ>& cloud,
-                                   const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
+                                   const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt,
+                                   const Eigen::VectorXd& instrument_forces = Eigen::VectorXd());
 
   // The last cloud's next correspondence updates (up to options.frame_updates of those its
   // register_cloud left, fewer once the scene's solver.time_budget is spent: the first always

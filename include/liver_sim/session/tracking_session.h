@@ -172,6 +172,7 @@ class TrackingSession {
   uint64_t clouds_registered_ = 0;
   bool registering_ = false;       // the model is converging on the last cloud
   bool one_shot_wanted_ = false;   // the next cloud is registered in one shot
+  Eigen::VectorXd one_shot_reference_forces_;  // the instruments' on the tissue when the one running started
   RegistrationFrame registered_;
 
   // Shared with the submitting threads, under mutex_.

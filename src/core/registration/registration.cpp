@@ -185,15 +185,18 @@ SurfaceRegistration::OneShotReport SurfaceRegistration::register_one_shot(OneSho
     throw std::invalid_argument("the one-shot registration's model has another mesh");
   OneShotReport report;
   report.one_shot = one_shot.solve(cloud, viewpoint, alignment_);
-  report.frame = adopt_one_shot(report.one_shot, cloud, viewpoint);
+  report.frame = adopt_one_shot(report.one_shot, cloud, viewpoint, model_.contact().forces(model_.positions()));
   return report;
 }
 
 RegistrationFrame SurfaceRegistration::adopt_one_shot(const OneShotResult& result,
                                                       const pcl::PointCloud<pcl::PointXYZ>& cloud,
-                                                      const std::optional<Eigen::Vector3d>& viewpoint) {
+                                                      const std::optional<Eigen::Vector3d>& viewpoint,
+                                                      const Eigen::VectorXd& instrument_forces) {
   if (result.positions.size() != model_.positions().size() || !result.positions.allFinite())
     throw std::invalid_argument("the one-shot registration's shape is not the model's");
+  if (instrument_forces.size() != 0 && (instrument_forces.size() != result.positions.size() || !instrument_forces.allFinite()))
+    throw std::invalid_argument("the instruments' forces at the one-shot registration's reference are not the model's");
   clear();
   const Eigen::VectorXd& x = result.positions;
   model_.set_positions(x);
@@ -201,7 +204,10 @@ RegistrationFrame SurfaceRegistration::adopt_one_shot(const OneShotResult& resul
   MechanicalModel& m = model_.mechanics();
   m.internal_forces(x, internal);
   m.external_forces(x, external);
+  // The instruments in the model press by themselves: their reaction at the reference, which
+  // the one-shot's shape carries, held by a constant load would stay where they pressed.
   shape_loads_ = internal - model_.load_scale() * external;
+  if (instrument_forces.size() != 0) shape_loads_ -= instrument_forces;
   set_model_loads();
   stepped_loads_ = hidden_loads_;
   alignment_ = result.alignment;

@@ -291,6 +291,7 @@ std::optional<RegistrationFrame> TrackingSession::register_pending_cloud(FrameRe
       return std::nullopt;
     }
     one_shot_wanted_ = false;
+    one_shot_reference_forces_ = model_->contact().forces(model_->positions());
     one_shot_->start(std::move(*cloud), registration_->alignment(), model_->positions());
     report.one_shot = FrameReport::OneShot::Started;
     notices_.tell("one-shot registration of a cloud started");
@@ -317,7 +318,8 @@ std::optional<RegistrationFrame> TrackingSession::adopt_one_shot(FrameReport& re
   if (!done) return std::nullopt;
   try {
     if (!done->solved) throw std::invalid_argument(done->error);
-    const RegistrationFrame f = registration_->adopt_one_shot(*done->solved, done->cloud.points, done->cloud.viewpoint);
+    const RegistrationFrame f = registration_->adopt_one_shot(*done->solved, done->cloud.points, done->cloud.viewpoint,
+                                                                  one_shot_reference_forces_);
     count_registered(f, done->cloud.stamp);
     report.one_shot = FrameReport::OneShot::Adopted;
     notices_.tell("one-shot registration adopted (" + std::to_string(static_cast<int>(1e3 * done->cpu_time)) +
