@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The package as an integrator deploys it (scripts/test.sh runs it after the tests; CI too): the
-# built workspace installed into a fresh folder (catkin_make install), that install space copied
+# built workspace installed into a fresh folder (the build's install target), that install space copied
 # away from the repository, the workspace's sources renamed out of reach, and from a clean
 # environment with only the copy's setup.bash: the node through liver_sim.launch until it
 # publishes ~status, simulate and stress on the installed scenes, the OR demo through
@@ -12,7 +12,9 @@ source "$(dirname "$0")/common.sh"
 RUN="$REPO/build/install_check"
 rm -rf "$RUN" "$WS/install"
 mkdir -p "$RUN"
-(cd "$WS" && catkin_make -j2 install >"$RUN/install.log" 2>&1) || { tail -30 "$RUN/install.log"; exit 1; }
+# make, not catkin_make: the workspace is configured and built already, and catkin_make would
+# configure it again (CMake, the message and reconfigure generators) for nothing.
+make -C "$WS/build" -j2 install >"$RUN/install.log" 2>&1 || { tail -30 "$RUN/install.log"; exit 1; }
 cp -a "$WS/install" "$RUN/install"
 cp -a "$REPO/test/downstream" "$REPO/test/playback_test.py" "$RUN/"
 

@@ -9,7 +9,6 @@
 
 #include "liver_sim/simulation/liver_model.h"
 #include "liver_sim/geometry/mesh.h"
-#include "liver_sim/registration/registration.h"
 #include "liver_sim/simulation/step_guard.h"
 #include "simulation/scenes.h"
 
