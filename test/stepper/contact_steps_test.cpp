@@ -143,11 +143,9 @@ TEST(Probe, HoveringProbeKeepsModifiedNewtonsFactor) {
 // contraction measures how far from linear the contacts make the problem, which a newer factor
 // meets as well. A probe sweeping 12 mm across the block, one iteration a step: no step
 // refactorises right after one that factorised (none finds no descent here, which would), and
-// the steps track converged dynamics nearly as closely as full Newton's, which refactorises in
-// every iteration: 0.32 against 0.25 mm. A fresh factor carries the contact forces' turning at
-// the present forces, a kept one at the forces it was made with (without the turning in the
-// matrix: 0.64 and 0.65 mm). Kills the rule judging the fresh factor too (16 factorisations, 6
-// of them right after another, against 9 and none; the same error).
+// the steps track converged dynamics as closely as full Newton's, which refactorises in every
+// iteration (0.452 against 0.455 of the peak motion). Kills the rule judging the fresh factor
+// too (16 factorisations, 6 of them right after another, against 9 and none; the same error).
 TEST(Probe, AFactorServesTheIterationAfterTheOneThatMadeIt) {
   const double r = 0.002, depth = 0.001, speed = 0.02;  // m, m, m/s
   Scene s = block_scene(3000, 0.45, 0.3);
@@ -185,7 +183,7 @@ TEST(Probe, AFactorServesTheIterationAfterTheOneThatMadeIt) {
   ASSERT_GT(contacts, 0) << "the probe never touched the block";
   ASSERT_GT(factorizations, 1) << "the sweep never asked for a new factor";
   EXPECT_EQ(right_after, 0);
-  EXPECT_LE(kept_error, 1.3 * refreshed_error);
+  EXPECT_LE(kept_error, 1.01 * refreshed_error);
 }
 
 // Haptic frames (1 ms) with stiffness-proportional damping (b = 0.02 s: the step's matrix is
@@ -260,43 +258,6 @@ TEST(Probe, BackgroundRefreshKeepsFactorisationsOutOfFrames) {
   ASSERT_GT(contacts, 0) << "the probe never touched the block";
   ASSERT_GT(background, 0) << "no factor came from the background";
   EXPECT_LE(in_frames, 6);
-}
-
-// A frictionless probe pressed deep into a block and swept across it, 33 ms frames of two full-
-// Newton iterations (a fresh factor each) against converged dynamics. The contact forces turn
-// with the probe's surface as their points move (lambda_n (I - n n^T) / R at a sphere), which
-// softens the problem across the normals: a Newton matrix without that term converges only
-// linearly and the frames lag. Kills dropping the term (NewtonStepper's tangent without
-// InstrumentContact::add_turning_stiffness): 2.0% of the peak motion against 0.51%.
-TEST(Probe, TheContactForcesTurningIsInTheNewtonMatrix) {
-  const double r = 0.004, depth = 0.003, speed = 0.03;  // m, m, m/s
-  Scene s = block_scene(3000, 0.45, 0.0);
-  s.instruments.push_back(swept_probe(r, 0.0005, depth, 0.2, 0.006, 0.014, speed));  // lowered 3.5 mm, swept 8 mm
-  s.solver.mode = SolverOptions::Mode::Dynamic;
-  s.solver.dt = 0.033;
-  s.solver.rayleigh_mass = 20;
-  Scene converged = s, full = s;
-  converged.solver.strategy = SolverOptions::Strategy::NewtonKrylov;
-  converged.solver.tolerance = 1e-8;
-  converged.solver.max_iterations = 100;
-  full.solver.strategy = SolverOptions::Strategy::FullNewton;
-  full.solver.max_iterations = 2;
-  full.solver.tolerance = 1e-14;  // every step takes its two iterations
-  const TetMesh block = make_box_mesh({kBlock, kBlock, kBlock}, {6, 6, 6});
-  LiverModel reference(block, converged), framed(block, full);
-  const Eigen::VectorXd rest = reference.positions();
-  double error = 0, peak = 0;
-  int contacts = 0;
-  for (int k = 0; k < 8; ++k) {  // the press and the sweep's first frames
-    const StepResult c = reference.step(), f = framed.step();
-    ASSERT_TRUE(c.converged()) << "step " << k << ": " << c.message;
-    ASSERT_NE(f.status, StepResult::Status::Diverged) << "step " << k << ": " << f.message;
-    contacts += c.contacts;
-    peak = std::max(peak, (reference.positions() - rest).cwiseAbs().maxCoeff());
-    error = std::max(error, (framed.positions() - reference.positions()).cwiseAbs().maxCoeff());
-  }
-  ASSERT_GT(contacts, 0) << "the probe never touched the block";
-  EXPECT_LE(error, 0.01 * peak);
 }
 
 }  // namespace

@@ -62,10 +62,6 @@ class InstrumentContact {
   // force in the frame of the instrument's surface at its point, which turns as the point moves.
   void add_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
   Eigen::VectorXd forces(const Eigen::VectorXd& x) const;
-  // Adds to the Newton matrix (values on the model's pattern, upper triangle; -d(residual)/dx)
-  // the stiffness of the contact forces turning with the instrument's surface as their points
-  // move, at x with the current forces. False when no contact carries force (nothing added).
-  bool add_turning_stiffness(const Eigen::VectorXd& x, std::vector<double>& values) const;
   // Work counters since construction: contact problems solved and compliance columns
   // (L^-1 P e_i) computed. Both stay 0 while no instrument comes within the alarm distance.
   long solves() const { return solves_; }

@@ -18,10 +18,6 @@ struct SurfaceContact {
   Eigen::Vector3d lambda; // N on the tissue at the point, in the frame (normal first)
 };
 
-// The frame of a unilateral contact whose instrument surface has this outward normal (unit):
-// columns normal, tangent, tangent.
-Eigen::Matrix3d surface_frame(const Eigen::Vector3d& normal);
-
 // Normal gap and tangential slips (bilateral: position error) of contact c of instrument `in`
 // at x (m), slips measured from x_stage, the positions at the start of the stage; and its frame
 // (columns: normal, tangents).

@@ -191,7 +191,6 @@ class NewtonStepper {
 
   Eigen::VectorXd x_, v_, x_start_;
   Eigen::VectorXd v_previous_;  // velocity of the step before the last (the predictor's acceleration)
-  bool turning_added_ = false;  // the assembled matrix carries the contact forces' turning
   bool rotations_continued_ = false;  // the last step predicted the rotations and was accepted
   double load_scale_ = 1.0;
   double state_energy_ = std::numeric_limits<double>::quiet_NaN();  // J, of (x_, v_) when known

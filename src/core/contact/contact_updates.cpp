@@ -3,8 +3,6 @@
 // (krylov_contact_update.h), the line search's scaling, the forces on the tissue.
 #include "liver_sim/contact/instrument_contact.h"
 
-#include "liver_sim/contact/instrument_shape.h"
-
 namespace liver_sim {
 
 int InstrumentContact::solve_contact_problem(CholmodSolver& factor, const Eigen::VectorXd& r, double force_tolerance) {
@@ -77,45 +75,6 @@ void InstrumentContact::add_forces(const Eigen::VectorXd& x, Eigen::VectorXd& f)
     const Eigen::Vector3d force = frame * c.lambda;
     for (int n = 0; n < c.point.count; ++n) f.segment<3>(3 * c.point.nodes[n]) += c.point.weights[n] * force;
   }
-}
-
-bool InstrumentContact::add_turning_stiffness(const Eigen::VectorXd& x, std::vector<double>& values) const {
-  // A contact's force F(p) lambda turns with the instrument's surface at its point p: at a
-  // point of a sphere of radius R, d(F lambda)/dp = lambda_n (I - n n^T) / R (frictionless).
-  // Without this term the linearisation is stiffer than the problem across the normal (a
-  // frictionless indenter lets the tissue slide off its curve), and Newton's iterations only
-  // contract by about lambda_n / R over the tissue's stiffness there. Derivative by central
-  // differences of the surface's frame (every shape), symmetrised for the Cholesky factor.
-  const SparsePattern& pattern = mechanics_.pattern();
-  const std::vector<char>& fixed = mechanics_.fixed_dofs();
-  bool added = false;
-  for (const Contact& c : contacts_) {
-    if (c.held >= 0 || c.lambda.isZero(0.0)) continue;
-    const InstrumentSlot& in = instruments_[c.instrument];
-    const InstrumentShape& shape = shape_of(in.options.type);
-    const Eigen::Vector3d p = c.point.at(x);
-    const double h = 1e-4 * shape.size(in.options);
-    Eigen::Matrix3d turning;  // d(F lambda)/dp
-    for (int k = 0; k < 3; ++k) {
-      const Eigen::Vector3d e = h * Eigen::Vector3d::Unit(k);
-      turning.col(k) = (surface_frame(shape.distance(in.options, in.pose, p + e).normal) -
-                        surface_frame(shape.distance(in.options, in.pose, p - e).normal)) *
-                       c.lambda / (2 * h);
-    }
-    // The matrix is -d(residual)/dx, and the force adds to the residual.
-    const Eigen::Matrix3d stiffness = -0.5 * (turning + turning.transpose());
-    for (int a = 0; a < c.point.count; ++a)
-      for (int b = 0; b < c.point.count; ++b)
-        for (int i = 0; i < 3; ++i)
-          for (int j = 0; j < 3; ++j) {
-            const int row = 3 * c.point.nodes[a] + i, col = 3 * c.point.nodes[b] + j;
-            if (row > col || fixed[row] || fixed[col]) continue;
-            const int entry = pattern.find(row, col);
-            if (entry >= 0) values[entry] += c.point.weights[a] * c.point.weights[b] * stiffness(i, j);
-          }
-    added = true;
-  }
-  return added;
 }
 
 Eigen::VectorXd InstrumentContact::forces(const Eigen::VectorXd& x) const {

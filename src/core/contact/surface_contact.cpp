@@ -32,15 +32,6 @@ SurfacePoint SurfacePoint::on_triangle(const Eigen::Vector3i& nodes, const Eigen
   return p;
 }
 
-Eigen::Matrix3d surface_frame(const Eigen::Vector3d& normal) {
-  // Tangents: any orthonormal pair (forces are carried between iterations in the world frame).
-  const Eigen::Vector3d helper = std::abs(normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
-  const Eigen::Vector3d t1 = normal.cross(helper).normalized();
-  Eigen::Matrix3d frame;
-  frame << normal, t1, normal.cross(t1);
-  return frame;
-}
-
 Eigen::Vector3d contact_rows(const SurfaceContact& c, const InstrumentSlot& in, const Eigen::VectorXd& x,
                              const Eigen::VectorXd& x_stage, Eigen::Matrix3d* frame) {
   const Eigen::Vector3d p = c.point.at(x);
@@ -49,7 +40,12 @@ Eigen::Vector3d contact_rows(const SurfaceContact& c, const InstrumentSlot& in, 
     return p - in.pose * in.held_local[c.held];
   }
   const SurfaceDistance d = shape_of(in.options.type).distance(in.options, in.pose, p);
-  *frame = surface_frame(d.normal);
+  // Tangents: any orthonormal pair (forces are carried between iterations in the world frame).
+  const Eigen::Vector3d helper = std::abs(d.normal.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d t1 = d.normal.cross(helper).normalized();
+  frame->col(0) = d.normal;
+  frame->col(1) = t1;
+  frame->col(2) = d.normal.cross(t1);
   // Slip over the step: against the instrument point that was under the surface point at its start.
   const Eigen::Vector3d slip = p - in.pose * (in.pose_start.inverse() * c.point.at(x_stage));
   return Eigen::Vector3d(d.distance, frame->col(1).dot(slip), frame->col(2).dot(slip));

@@ -146,10 +146,7 @@ bool NewtonStepper::iteration_out_of_time(Solve& s, bool fresh_factor) {
 
 bool NewtonStepper::newton_update(UpdateStrategy& update, Solve& s, bool fresh_factor) {
   StepResult& result = s.result;
-  if (fresh_factor || update.current_tangent()) {
-    matrix_.assemble(result.timing);
-    turning_added_ = contact_.active() && contact_.add_turning_stiffness(x_, matrix_.values());
-  }
+  if (fresh_factor || update.current_tangent()) matrix_.assemble(result.timing);
   if (!update.prepare(result) || (fresh_factor && !factorize(result))) {
     s.fail("tangent matrix is not positive definite");
     return false;
@@ -180,7 +177,6 @@ bool NewtonStepper::newton_update(UpdateStrategy& update, Solve& s, bool fresh_f
 
 bool NewtonStepper::factorize(StepResult& result) {
   if (take_fault(InjectedFault::NotPositiveDefinite)) {
-    turning_added_ = false;
     const std::vector<char>& fixed = mechanics_.fixed_dofs();
     const SparsePattern& pattern = matrix_.pattern();
     for (int i = 0; i < pattern.rows(); ++i)
@@ -189,12 +185,6 @@ bool NewtonStepper::factorize(StepResult& result) {
         break;
       }
   }
-  if (factor_.factorize(matrix_.values(), result)) return true;
-  // Contact forces that turn faster than the tissue resists across their normals make the
-  // matrix indefinite: the tangent without their turning still serves (slower convergence).
-  if (!turning_added_) return false;
-  turning_added_ = false;
-  matrix_.assemble(result.timing);
   return factor_.factorize(matrix_.values(), result);
 }
 
