@@ -59,22 +59,14 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     // An iteration on an old factor that finds no descent (no trial accepted, or only by the
     // potential test in the last iteration allowed, which would end the step above where it
     // started and roll it back as stalled), or whose contact update the search had to cut
-    // short: the factor no longer fits the state. A cut contact update leaves the gaps it was
-    // to close open, frame after frame while the factor is kept (doc/performance.md). Redone on
-    // a fresh factor, once per Newton solve (per instrument stage), instead of spent; with the
-    // background refresh only when the factorisation fits the frame's time left. Otherwise the
-    // iteration is kept as the search left it and the background asked for the factor: redone
-    // in the next frame instead, 41 of 300 node-like frames on the phantom factorised in the
-    // step, each overrunning its frame (doc/performance.md).
+    // short: the factor no longer fits the state. Redone on a fresh one, once per Newton solve
+    // (per instrument stage), instead of spent. A cut contact update leaves the gaps it was to
+    // close open, frame after frame while the factor is kept (doc/performance.md).
     const bool no_descent = taken.merit >= s.merit && (!taken.accepted || s.done() == solver_.max_iterations);
     if (update.redoes_without_descent() && !fresh_factor && !s.refreshed &&
         (no_descent || (contact_update && taken.alpha < 1))) {
-      if (solver_.background_refresh && !factor_.fits(deadline_)) {
-        factor_.want_refresh();
-      } else {
-        if (!undo_for_fresh_factor(s, contact_update)) break;
-        continue;
-      }
+      if (!undo_for_fresh_factor(s, contact_update)) break;
+      continue;
     }
     x_.swap(x_try_);
     r_.swap(r_try_);
