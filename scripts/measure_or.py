@@ -65,16 +65,7 @@ def main():
     rng = np.random.default_rng(1)
     session = Session()
     meshes = []  # (arrival time (s), stamp (ns)) of every mesh marker
-    deadline = time.time() + 120
-    while time.time() < deadline:
-        with session.lock:
-            ready = session.mesh is not None and session.targets is not None and session.status is not None \
-                and session.status.state == "idle"
-        if ready:
-            break
-        time.sleep(0.1)
-    else:
-        sys.exit("measure_or: the node did not reach its equilibrium within 120 s")
+    session.wait_for_equilibrium(120, "measure_or")
     with session.lock:
         tumour = session.targets[0].copy()
     triangles = session.triangles()

@@ -180,6 +180,18 @@ class Session:
         with self.lock:
             return np.array([[p.x, p.y, p.z] for p in self.mesh.points]).reshape(-1, 3, 3)
 
+    def wait_for_equilibrium(self, timeout, who):
+        """Waits until the node has published its mesh, targets and an idle status (its
+        equilibrium before any input); exits naming `who` after `timeout` seconds."""
+        deadline = time.time() + timeout
+        while time.time() < deadline and not rospy.is_shutdown():
+            with self.lock:
+                if self.mesh is not None and self.targets is not None and self.status is not None \
+                        and self.status.state == "idle":
+                    return
+            time.sleep(0.1)
+        sys.exit(f"{who}: the node did not reach its equilibrium within {timeout:g} s")
+
 
 def surface_height(triangles, xy):
     """Height (m) of the upper surface above the point xy: the highest crossing of the vertical
@@ -214,16 +226,7 @@ def main():
 
     # The pre-operative equilibrium: the node at rest under gravity, before any input.
     print("or_demo: waiting for the node's pre-operative equilibrium ...", flush=True)
-    deadline = time.time() + 90
-    while time.time() < deadline and not rospy.is_shutdown():
-        with session.lock:
-            ready = session.mesh is not None and session.targets is not None and session.status is not None \
-                and session.status.state == "idle"
-        if ready:
-            break
-        time.sleep(0.1)
-    else:
-        sys.exit("or_demo: the node did not reach its equilibrium within 90 s")
+    session.wait_for_equilibrium(90, "or_demo")
     scene = yaml.safe_load(open(rospy.get_param(f"{NODE}/scene")))
     tumour_name = scene["probes"][0]["name"]
     with session.lock:

@@ -96,13 +96,13 @@ class SurfaceRegistration {
   // The hand-over alone, of a one-shot result found elsewhere (another thread, from the
   // alignment in force when it started) for `cloud`: what register_one_shot does after the
   // solve. Throws std::invalid_argument, with nothing changed, for a result of another mesh.
-  // `instrument_forces`: the instruments' contact forces on the tissue (per DOF, N; empty: none)
-  // at the shape the solve started from (OneShotRegistration::set_reference), which that shape
+  // `instrument_forces`: the instruments' contact forces on the tissue (per DOF, N; zeros when
+  // none touched it) at the shape the solve started from (OneShotRegistration::set_reference), which that shape
   // and so the result carry: the loads holding the shape leave them out, since the instruments
   // in the model press by themselves (where they are now, not where they were).
   RegistrationFrame adopt_one_shot(const OneShotResult& result, const pcl::PointCloud<pcl::PointXYZ>& cloud,
-                                   const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt,
-                                   const Eigen::VectorXd& instrument_forces = Eigen::VectorXd());
+                                   const std::optional<Eigen::Vector3d>& viewpoint,
+                                   const Eigen::VectorXd& instrument_forces);
 
   // The last cloud's next correspondence updates (up to options.frame_updates of those its
   // register_cloud left, fewer once the scene's solver.time_budget is spent: the first always

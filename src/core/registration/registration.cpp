@@ -195,7 +195,7 @@ RegistrationFrame SurfaceRegistration::adopt_one_shot(const OneShotResult& resul
                                                       const Eigen::VectorXd& instrument_forces) {
   if (result.positions.size() != model_.positions().size() || !result.positions.allFinite())
     throw std::invalid_argument("the one-shot registration's shape is not the model's");
-  if (instrument_forces.size() != 0 && (instrument_forces.size() != result.positions.size() || !instrument_forces.allFinite()))
+  if (instrument_forces.size() != result.positions.size() || !instrument_forces.allFinite())
     throw std::invalid_argument("the instruments' forces at the one-shot registration's reference are not the model's");
   clear();
   const Eigen::VectorXd& x = result.positions;
@@ -207,7 +207,7 @@ RegistrationFrame SurfaceRegistration::adopt_one_shot(const OneShotResult& resul
   // The instruments in the model press by themselves: their reaction at the reference, which
   // the one-shot's shape carries, held by a constant load would stay where they pressed.
   shape_loads_ = internal - model_.load_scale() * external;
-  if (instrument_forces.size() != 0) shape_loads_ -= instrument_forces;
+  shape_loads_ -= instrument_forces;
   set_model_loads();
   stepped_loads_ = hidden_loads_;
   alignment_ = result.alignment;
