@@ -152,10 +152,9 @@ class NewtonStepper {
   bool factorize(StepResult& result);
   // Backtracking from x_ along dx_ into x_try_, r_try_.
   LineSearch line_search(const Solve& s, bool contact_update);
-  // An iteration without descent on an old factor: undone, to be redone on the old factor when
-  // old_factor, else on a fresh factor when its factorisation fits in the time left (true);
-  // else the step ends here.
-  bool undo_for_redo(Solve& s, bool contact_update, bool old_factor);
+  // An iteration without descent on an old factor: undone, to be redone on a fresh factor when
+  // its factorisation fits in the time left (true); else the step ends here.
+  bool undo_for_fresh_factor(Solve& s, bool contact_update);
   // Dynamic steps: the mechanical energy (kinetic + elastic) and the work of the loads and of
   // the constraints over the step that ended at x_ (J).
   double mechanical_energy(const Eigen::VectorXd& x, const Eigen::VectorXd& v);

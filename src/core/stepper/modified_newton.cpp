@@ -1,9 +1,7 @@
 // Modified Newton: the factor of an earlier tangent solved directly, with contacts the contact
 // forces in the same solve (the direct contact update); refreshed when an iteration contracts
 // the residual too little, in the step or, with SolverOptions::background_refresh, on a thread
-// of its own while the old factor serves: as the direct solve's matrix while it still
-// contracts, as the preconditioner of GMRES on the current Jacobian once it no longer does
-// (Courtecuisse et al. 2014).
+// of its own while the old factor serves.
 #include "update_strategy.h"
 
 namespace liver_sim {
@@ -18,22 +16,11 @@ class ModifiedNewton final : public UpdateStrategy {
  public:
   using UpdateStrategy::UpdateStrategy;
   SolverOptions::Strategy with_contacts() const override { return SolverOptions::Strategy::ModifiedNewton; }
-  void begin_iteration(StepResult& result) override {
-    const int taken = result.background_factorizations;
-    UpdateStrategy::begin_iteration(result);
-    if (result.background_factorizations != taken || !parts_.factor.valid()) preconditioner_only_ = false;
-  }
   bool factorizes() const override { return !parts_.factor.valid(); }
   bool current_tangent() const override { return false; }
-  int solve(const NewtonIteration& it, Eigen::VectorXd& dx) override {
-    krylov_ = preconditioner_only_;
-    return krylov_ ? krylov_solve(it, dx, it.deadline) : direct_solve(it, dx);
-  }
-  // The Krylov update keeps its contact forces (newton_stepper.cpp's line search); an
-  // iteration of it without descent is not redone on a fresh factor: the background makes it.
-  bool scales_contact_forces() const override { return !krylov_; }
-  bool redoes_without_descent() const override { return !krylov_; }
-  bool redoes_on_old_factor() override { return precondition_until_refreshed(); }
+  int solve(const NewtonIteration& it, Eigen::VectorXd& dx) override { return direct_solve(it, dx); }
+  bool scales_contact_forces() const override { return true; }
+  bool redoes_without_descent() const override { return true; }
 
   // The factor is kept while it contracts the residual well: the residual it was asked to zero,
   // which carries the update's change of the contact forces (a step that closes new gaps raises
@@ -45,7 +32,6 @@ class ModifiedNewton final : public UpdateStrategy {
   // frames a fresh factor left more than half of the residual about as often as an older one
   // (33% and 29% of the iterations with contact forces changing).
   void end_iteration(const IterationEnd& end) override {
-    if (krylov_ || end.fresh_factor) return;
     double asked = end.start_norm, contraction = kContraction;
     if (end.contact_forces_scaled) {
       asked_ = end.r_start;
@@ -55,29 +41,17 @@ class ModifiedNewton final : public UpdateStrategy {
         if (fixed[i]) asked_[i] = 0;
       asked = asked_.norm();
     }
-    if (end.end_norm <= contraction * asked) return;
-    // A factor that no longer contracts at all is not kept as the matrix of the direct solve:
-    // without background_refresh it is refactorised in the step; with it, it preconditions
-    // GMRES on the current Jacobian until the background's factor arrives.
-    if (end.end_norm <= asked)
-      refresh();
-    else if (!precondition_until_refreshed())
+    if (end.end_norm <= contraction * asked || end.fresh_factor) return;
+    // A factor that no longer contracts at all is not kept waiting for the background (which a
+    // busy processor may hold up for many frames): refreshed in the step.
+    if (end.end_norm > asked)
       parts_.factor.mark_stale();
+    else
+      refresh();
   }
 
  private:
-  // With background_refresh: the factor preconditions GMRES until the background's arrives,
-  // which is asked for (true).
-  bool precondition_until_refreshed() {
-    if (!parts_.solver.background_refresh) return false;
-    refresh();
-    preconditioner_only_ = true;
-    return true;
-  }
-
-  Eigen::VectorXd asked_;             // the residual the iteration was asked to zero
-  bool preconditioner_only_ = false;  // the factor no longer contracts: it preconditions GMRES
-  bool krylov_ = false;               // the last solve was GMRES's
+  Eigen::VectorXd asked_;  // the residual the iteration was asked to zero
 };
 
 }  // namespace

@@ -59,14 +59,13 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     // An iteration on an old factor that finds no descent (no trial accepted, or only by the
     // potential test in the last iteration allowed, which would end the step above where it
     // started and roll it back as stalled), or whose contact update the search had to cut
-    // short: the factor no longer fits the state. Redone on a fresh one (or as the strategy
-    // asks, on the old one: UpdateStrategy::redoes_on_old_factor), once per Newton solve
+    // short: the factor no longer fits the state. Redone on a fresh one, once per Newton solve
     // (per instrument stage), instead of spent. A cut contact update leaves the gaps it was to
     // close open, frame after frame while the factor is kept (doc/performance.md).
     const bool no_descent = taken.merit >= s.merit && (!taken.accepted || s.done() == solver_.max_iterations);
     if (update.redoes_without_descent() && !fresh_factor && !s.refreshed &&
         (no_descent || (contact_update && taken.alpha < 1))) {
-      if (!undo_for_redo(s, contact_update, update.redoes_on_old_factor())) break;
+      if (!undo_for_fresh_factor(s, contact_update)) break;
       continue;
     }
     x_.swap(x_try_);
@@ -228,14 +227,13 @@ NewtonStepper::LineSearch NewtonStepper::line_search(const Solve& s, bool contac
   return best;
 }
 
-bool NewtonStepper::undo_for_redo(Solve& s, bool contact_update, bool old_factor) {
-  // The iteration is undone and redone: on the old factor when the strategy asks so (it
-  // iterates otherwise with it), else on a fresh one, refactorised at x (evaluated again: the
-  // matrix is assembled where the last evaluation was). When the factorisation would overrun
-  // the time budget, the frame ends where the iteration started, and the next one starts with it.
-  if (!old_factor) factor_.mark_stale();
+bool NewtonStepper::undo_for_fresh_factor(Solve& s, bool contact_update) {
+  // The factor is refactorised at x (evaluated again: the matrix is assembled where the last
+  // evaluation was) and the iteration redone. When the factorisation would overrun the time
+  // budget, the frame ends where the iteration started, and the next one starts with it.
+  factor_.mark_stale();
   if (contact_update) contact_.scale_update(0.0);
-  const bool fits = old_factor || factor_.fits(deadline_);
+  const bool fits = factor_.fits(deadline_);
   if (fits) {
     s.refreshed = true;
     --s.result.iterations;

@@ -37,27 +37,6 @@ int UpdateStrategy::direct_solve(const NewtonIteration& it, Eigen::VectorXd& dx)
   return 0;
 }
 
-int UpdateStrategy::krylov_solve(const NewtonIteration& it, Eigen::VectorXd& dx, Gmres::Clock::time_point deadline) {
-  if (!parts_.contact.active()) {
-    // Captures `this` only: a std::function keeps that without an allocation.
-    const Gmres::Operator preconditioner = [this](const Eigen::VectorXd& in, Eigen::VectorXd& out) {
-      parts_.factor.solver().solve(in, out);
-    };
-    const int krylov = gmres_.solve(it.jacobian, preconditioner, it.r, dx, it.forcing, kMaxKrylov, deadline);
-    krylov_residual_ = gmres_.relative_residual();
-    krylov_out_of_time_ = gmres_.out_of_time();
-    return krylov;
-  }
-  const auto t0 = std::chrono::steady_clock::now();
-  const InstrumentContact::Update update = parts_.contact.krylov_update(parts_.factor.solver(), it.jacobian, it.r,
-                                                                        it.forcing, it.force_tolerance, deadline, dx);
-  it.result.contact_sweeps += update.sweeps;
-  it.result.timing.contact_ms += ms_since(t0);
-  krylov_residual_ = update.relative_residual;
-  krylov_out_of_time_ = update.out_of_time;
-  return update.krylov;
-}
-
 void UpdateStrategy::begin_iteration(StepResult& result) {
   if (parts_.solver.background_refresh && parts_.factor.valid()) parts_.factor.refresh_in_background(parts_.matrix, result);
 }

@@ -16,7 +16,6 @@
 //                              force change the update made
 //   redoes_without_descent()   an iteration on an old factor that finds no descent is redone on
 //                              a fresh one, once per Newton solve
-//   redoes_on_old_factor()     ... or, as the strategy then iterates, on the old one
 //   end_iteration()            after an accepted iteration: the factor judged
 #pragma once
 
@@ -87,19 +86,12 @@ class UpdateStrategy {
   virtual int solve(const NewtonIteration& it, Eigen::VectorXd& dx) = 0;
   virtual bool scales_contact_forces() const { return false; }
   virtual bool redoes_without_descent() const { return false; }
-  // Asked when an iteration is to be redone: the redo keeps the old factor (true), as the
-  // strategy iterates otherwise with it from now on, or factorises afresh in the step.
-  virtual bool redoes_on_old_factor() { return false; }
   virtual void end_iteration(const IterationEnd&) {}
 
  protected:
   // dx = A^-1 r with the factor; with contacts, the direct contact update: the contact forces
   // in the same solve.
   int direct_solve(const NewtonIteration& it, Eigen::VectorXd& dx);
-  // dx from GMRES on the true Jacobian preconditioned by the factor, until `deadline`; with
-  // contacts, InstrumentContact::krylov_update. Returns the Krylov iterations; the solve's end
-  // in krylov_residual_ and krylov_out_of_time_.
-  int krylov_solve(const NewtonIteration& it, Eigen::VectorXd& dx, Gmres::Clock::time_point deadline);
   // A factor that preconditions an iterative solve poorly (many iterations, or the solve not
   // reaching its tolerance) is refreshed at the next iteration. A solve stopped at the deadline
   // is judged by its iterations only: its residual says when it stopped, not how it converged.
@@ -108,11 +100,6 @@ class UpdateStrategy {
   // a thread of its own while it serves meanwhile.
   void refresh();
   StrategyParts parts_;
-  double krylov_residual_ = 0;      // relative, at the end of the last krylov_solve
-  bool krylov_out_of_time_ = false; // it stopped at its deadline short of its tolerance
-
- private:
-  Gmres gmres_;
 };
 
 // The strategy's type. Throws std::bad_alloc.
