@@ -4,9 +4,9 @@
 // inputs of an OR session), and the instruments of --instruments (a YAML file with an
 // `instruments:` list in the scene format: a probe pressing and sweeping, a grasper lifting) move
 // along their trajectories from the start of the frames (or, for a file with a `press_sweep:`
-// map, a probe pressing and sweeping as the node's measurement poses it: bench_press_sweep.h). Each solver strategy runs it, every frame
-// timed, and its displacement field is compared with a converged reference run (Newton-Krylov to
-// a residual of 1e-10).
+// map, a probe pressing and sweeping as the node's measurement poses it: bench_press_sweep.h).
+// Each solver strategy runs it, every frame timed, and its displacement field is compared with a
+// converged reference run (Newton-Krylov to a residual of 1e-10).
 //   bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]
 //         [--frequency F] [--strategy SPEC]... [--threads N,...] [--load N,...] [--realtime-priority P]
 //         [--paced] [--node-placement] [--csv FILE] [--quiet]
@@ -310,16 +310,18 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
 
 int run_all(const Options& o) {
   Loading loading = o.loading;
-  const std::optional<liver_sim::bench::PressSweep> press = o.instruments.empty() ? std::nullopt : liver_sim::bench::read_press_sweep(o.instruments);
+  namespace bench = liver_sim::bench;
+  const std::optional<bench::PressSweep> press =
+      o.instruments.empty() ? std::nullopt : bench::read_press_sweep(o.instruments);
   if (!o.instruments.empty() && !press) loading.instruments = liver_sim::load_instruments(o.instruments);
   const int frames = loading.frames;
   Spec reference_spec = parse_spec("newton_krylov:50:1e-10");
   reference_spec.text = "reference";
   const Eigen::VectorXd start = equilibrium(o.scene, o.overrides);
   if (press) {
-    const double surface =
-        liver_sim::bench::surface_height(liver_sim::load_scene_mesh(liver_sim::load_scene(o.scene, o.overrides)).T, start, press->above);
-    loading.instruments = {liver_sim::bench::press_sweep_instrument(*press, surface)};
+    const Scene scene = liver_sim::load_scene(o.scene, o.overrides);
+    const double surface = bench::surface_height(liver_sim::load_scene_mesh(scene).T, start, press->above);
+    loading.instruments = {bench::press_sweep_instrument(*press, surface)};
     if (!o.quiet) std::cerr << "bench: press_sweep: the surface lies at z = " << surface << " m under the probe\n";
   }
   std::vector<std::string> reference_overrides = o.overrides;
