@@ -3,9 +3,10 @@
 // breathe, scaled by 1 + A sin(2 pi f t) (suction on the cube, gravity on the liver: the smooth
 // inputs of an OR session), and the instruments of --instruments (a YAML file with an
 // `instruments:` list in the scene format: a probe pressing and sweeping, a grasper lifting) move
-// along their trajectories from the start of the frames. Each solver strategy runs it, every frame
-// timed, and its displacement field is compared with a converged reference run (Newton-Krylov to
-// a residual of 1e-10).
+// along their trajectories from the start of the frames (or, for a file with a `press_sweep:`
+// map, a probe pressing and sweeping as the node's measurement poses it: bench_press_sweep.h).
+// Each solver strategy runs it, every frame timed, and its displacement field is compared with a
+// converged reference run (Newton-Krylov to a residual of 1e-10).
 //   bench --scene FILE [--instruments FILE] [--set K=V]... [--frames N] [--amplitude A]
 //         [--frequency F] [--strategy SPEC]... [--threads N,...] [--load N,...] [--realtime-priority P]
 //         [--paced] [--node-placement] [--csv FILE] [--quiet]
@@ -37,6 +38,7 @@
 #include "liver_sim/runtime/frame_clock.h"
 #include "liver_sim/runtime/worker_pool.h"
 #include "liver_sim/simulation/liver_model.h"
+#include "bench_press_sweep.h"
 #include "tool_io.h"
 
 namespace {
@@ -249,7 +251,8 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
   app.add_option("--scene", o->scene, "YAML scene (README, 'Scene format'); required")->option_text("FILE")->required();
   app.add_option("--instruments", o->instruments,
                  "YAML file with an instruments: list in the scene format, moving along\n"
-                 "their trajectories from the first frame (e.g. config/bench/*.yaml)")
+                 "their trajectories from the first frame (e.g. config/bench/*.yaml), or with\n"
+                 "a press_sweep: map, a probe pressing into the surface found under it")
       ->option_text("FILE");
   tool::add_overrides(app, o->overrides,
                       "override a scalar of the scene, e.g. --set solver.dt=0.001 (repeatable)");
@@ -307,11 +310,20 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
 
 int run_all(const Options& o) {
   Loading loading = o.loading;
-  if (!o.instruments.empty()) loading.instruments = liver_sim::load_instruments(o.instruments);
+  namespace bench = liver_sim::bench;
+  const std::optional<bench::PressSweep> press =
+      o.instruments.empty() ? std::nullopt : bench::read_press_sweep(o.instruments);
+  if (!o.instruments.empty() && !press) loading.instruments = liver_sim::load_instruments(o.instruments);
   const int frames = loading.frames;
   Spec reference_spec = parse_spec("newton_krylov:50:1e-10");
   reference_spec.text = "reference";
   const Eigen::VectorXd start = equilibrium(o.scene, o.overrides);
+  if (press) {
+    const Scene scene = liver_sim::load_scene(o.scene, o.overrides);
+    const double surface = bench::surface_height(liver_sim::load_scene_mesh(scene).T, start, press->above);
+    loading.instruments = {bench::press_sweep_instrument(*press, surface)};
+    if (!o.quiet) std::cerr << "bench: press_sweep: the surface lies at z = " << surface << " m under the probe\n";
+  }
   std::vector<std::string> reference_overrides = o.overrides;
   reference_overrides.push_back(kNoBudget);
   const Run reference = run(o.scene, reference_overrides, reference_spec, loading, o.thread_counts[0], 0, start, o.quiet);
