@@ -84,7 +84,10 @@ def main():
     with session.lock:
         step0 = session.status.step
     statuses = []  # (state, text) of every ~status while the probe moves
-    rospy.Subscriber(f"{NODE}/status", SimulationStatus, lambda m: statuses.append((m.state, m.text)), queue_size=100)
+    step_times = {}  # step -> its wall time (s): a busy loop repeats the last step's status
+    rospy.Subscriber(f"{NODE}/status", SimulationStatus,
+                     lambda m: (statuses.append((m.state, m.text)), step_times.setdefault(m.step, m.step_time)),
+                     queue_size=100)
     while time.time() < start + args.duration and not rospy.is_shutdown():
         now = time.time()
         if now >= next_pose:
@@ -122,6 +125,8 @@ def main():
         "inputs_sent": len(sent),
         "status": {"messages": len(statuses), "iteration_cap": sum("iteration cap" in t for _, t in statuses),
                    "states": {w: sum(s == w for s, _ in statuses) for w in sorted({s for s, _ in statuses})}},
+        "step_ms": {"median": round(1e3 * float(np.median(list(step_times.values()))), 1),
+                    "p95": round(1e3 * float(np.percentile(list(step_times.values()), 95)), 1)} if step_times else None,
         "latency_ms": {"median": round(float(np.median(lat)), 1), "p95": round(float(np.percentile(lat, 95)), 1),
                        "max": round(float(lat.max()), 1)} if len(lat) else None,
     }
