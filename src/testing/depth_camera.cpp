@@ -6,12 +6,12 @@
 #include <random>
 #include <stdexcept>
 
+#include "liver_sim/geometry/node_positions.h"
+
 namespace liver_sim {
 namespace {
 
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
-
-Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
 
 // Range along the unit ray (o, d) to a capsule (segment a-b, radius r), or infinity: the
 // cylinder's body if the ray enters it between the ends, else the nearer end sphere.

@@ -6,10 +6,10 @@
 #include <random>
 #include <stdexcept>
 
+#include "liver_sim/geometry/node_positions.h"
+
 namespace liver_sim {
 namespace {
-
-Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
 
 // The boundary node of the rest mesh nearest to p.
 int nearest_surface_node(const TetMesh& mesh, const Eigen::Vector3d& p) {

@@ -10,10 +10,10 @@
 #include <unordered_map>
 #include <vector>
 
+#include "liver_sim/geometry/node_positions.h"
+
 namespace liver_sim {
 namespace {
-
-Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
 
 // Points spread uniformly over the triangles' area, about `spacing` apart: per triangle its
 // expected count, rounded at random.

@@ -12,6 +12,7 @@
 #include "liver_sim/contact/grasper_jaws.h"
 #include "liver_sim/geometry/mesh.h"
 #include "liver_sim/scene/scene.h"
+#include "node/markers.h"
 #include "regions.h"
 
 namespace liver_sim {
@@ -23,7 +24,6 @@ using visualization_msgs::Marker;
 const Eigen::Vector3d kTip(0.01, -0.02, 0.03);
 const Eigen::Quaterniond kTurn(Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()));
 
-Eigen::Vector3d position(const Marker& m) { return {m.pose.position.x, m.pose.position.y, m.pose.position.z}; }
 Eigen::Quaterniond orientation(const Marker& m) {
   return {m.pose.orientation.w, m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z};
 }

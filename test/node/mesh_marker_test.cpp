@@ -13,6 +13,7 @@
 #include "liver_sim/geometry/mesh.h"
 #include "liver_sim/io/scene_files.h"
 #include "liver_sim/scene/scene.h"
+#include "node/markers.h"
 #include "regions.h"
 
 namespace liver_sim {
@@ -210,10 +211,6 @@ struct RvizView {
     return Eigen::AlignedBox2d(project(at) - half, project(at) + half);
   }
 };
-
-Eigen::Vector3d position(const visualization_msgs::Marker& m) {
-  return Eigen::Vector3d(m.pose.position.x, m.pose.position.y, m.pose.position.z);
-}
 
 // The node's view is the rviz config's: the surface's light and the labels' layout come from its camera.
 TEST(MeshMarker, ViewerIsTheRvizConfigsCamera) {

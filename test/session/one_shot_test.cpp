@@ -11,11 +11,10 @@
 
 #include "liver_sim/session/tracking_session.h"
 #include "scenarios.h"
+#include "session/files.h"
 
 namespace liver_sim {
 namespace {
-
-std::string source(const std::string& path) { return std::string(LIVER_SIM_SOURCE_DIR) + "/" + path; }
 
 struct FarCloud {
   Scene scene = load_scene(source("config/scenes/liver_phantom.yaml"));

@@ -8,11 +8,10 @@
 
 #include "liver_sim/session/tracking_session.h"
 #include "scenarios.h"
+#include "session/files.h"
 
 namespace liver_sim {
 namespace {
-
-std::string source(const std::string& path) { return std::string(LIVER_SIM_SOURCE_DIR) + "/" + path; }
 
 // The phantom and a cloud of it lifted by 5 N, seen from the front.
 struct Phantom {

@@ -5,13 +5,12 @@
 #include <cmath>
 
 #include "liver_sim/geometry/closest_points.h"
+#include "liver_sim/geometry/node_positions.h"
 
 namespace liver_sim {
 namespace {
 
 constexpr int kLeafTriangles = 4;
-
-Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
 
 // The squared distance from p to a box (0 inside), without the per-axis branches of Eigen's
 // AlignedBox::squaredExteriorDistance (two per axis and box).

@@ -8,10 +8,10 @@
 #include <Eigen/SVD>
 #include <cmath>
 
+#include "liver_sim/geometry/node_positions.h"
+
 namespace liver_sim {
 namespace {
-
-Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
 
 // Orthonormal frame (columns) of the first edge and the plane of the first two edges.
 Eigen::Matrix3d edge_frame(const Eigen::Vector3d& e01, const Eigen::Vector3d& e02) {

@@ -5,10 +5,10 @@
 #include <Eigen/LU>
 #include <cmath>
 
+#include "liver_sim/geometry/node_positions.h"
+
 namespace liver_sim {
 namespace {
-
-Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
 
 // Two orthonormal in-plane axes (columns): the first edge and its normal in the plane.
 Eigen::Matrix<double, 3, 2> plane_axes(const Eigen::Vector3d& e01, const Eigen::Vector3d& e02) {

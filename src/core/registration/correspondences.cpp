@@ -6,14 +6,10 @@
 #include <sstream>
 
 #include "liver_sim/geometry/closest_points.h"
+#include "liver_sim/geometry/node_positions.h"
 #include "liver_sim/registration/registration.h"
 
 namespace liver_sim {
-namespace {
-
-Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
-
-}  // namespace
 
 int SurfaceRegistration::find_correspondences(bool new_cloud, const std::optional<Eigen::Vector3d>& viewpoint,
                                               RegistrationFrame& frame) {

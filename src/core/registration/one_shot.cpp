@@ -6,6 +6,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "liver_sim/geometry/node_positions.h"
 #include "liver_sim/registration/cloud_filter.h"
 #include "liver_sim/registration/cloud_normals.h"
 
@@ -14,8 +15,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
-
-Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
 
 std::string check(bool ok, const std::string& field, const std::string& bound, double value) {
   if (ok) return "";

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "liver_sim/geometry/node_positions.h"
+
 namespace liver_sim {
 namespace {
 
@@ -11,8 +13,6 @@ using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
-
-Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
 
 }  // namespace
 

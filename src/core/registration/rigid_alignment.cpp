@@ -4,14 +4,10 @@
 #include <algorithm>
 #include <cmath>
 
+#include "liver_sim/geometry/node_positions.h"
 #include "liver_sim/registration/registration.h"
 
 namespace liver_sim {
-namespace {
-
-Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
-
-}  // namespace
 
 void SurfaceRegistration::align_rigidly() {
   // Point-to-plane ICP against the boundary at the current state, sampled on a barycentric grid

@@ -3,12 +3,9 @@
 #include <cmath>
 #include <limits>
 
+#include "liver_sim/geometry/node_positions.h"
+
 namespace liver_sim {
-namespace {
-
-Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
-
-}  // namespace
 
 SurfacePatches make_surface_patches(MechanicalModel& m, double spacing) {
   const Eigen::VectorXd& X = m.rest_positions();

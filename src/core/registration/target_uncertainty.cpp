@@ -5,14 +5,10 @@
 #include <limits>
 #include <stdexcept>
 
+#include "liver_sim/geometry/node_positions.h"
 #include "liver_sim/registration/registration.h"
 
 namespace liver_sim {
-namespace {
-
-Eigen::Vector3d node(const Eigen::VectorXd& x, int i) { return x.segment<3>(3 * i); }
-
-}  // namespace
 
 std::vector<EmbeddedPoint> embed_points(const Eigen::MatrixX4i& T, const Eigen::VectorXd& x,
                                         const std::vector<Eigen::Vector3d>& points) {
