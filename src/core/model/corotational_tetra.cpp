@@ -7,6 +7,7 @@
 #include <Eigen/LU>
 #include <Eigen/SVD>
 #include <cmath>
+#include <limits>
 
 #include "liver_sim/geometry/node_positions.h"
 
@@ -219,7 +220,9 @@ Eigen::Matrix3d polar_rotation_svd(const Eigen::Matrix3d& F) {
 Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F) {
   // Scaled Newton iteration for the polar factor, X <- (g X + X^-T / g) / 2 with Frobenius-norm
   // scaling (Higham 1986), to round-off: the Jacobian products of the Newton-Krylov solver
-  // difference the forces at 1e-8 steps.
+  // difference the forces at 1e-8 steps. A non-finite F gives a non-finite R, as the state's
+  // checks expect: Eigen's SVD of it reads values it never set (valgrind), a finite garbage R.
+  if (!F.allFinite()) return Eigen::Matrix3d::Constant(std::numeric_limits<double>::quiet_NaN());
   if (!well_shaped(F)) return polar_rotation_svd(F);
   Eigen::Matrix3d X = F;
   for (int k = 0; k < 20; ++k) {
