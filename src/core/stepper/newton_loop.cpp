@@ -15,9 +15,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 constexpr int kStallIterations = 5; // a capped step this long that ends no lower than it began has stalled
-// The share of an iteration's starting residual its contact solve needs to reach (times 0.1, as
-// the step's tolerance); the gaps are solved within 1% of contact.tolerance whatever this share.
-constexpr double kContactForcing = 1e-2;
 
 std::string stalled(double merit, double start_merit, int iterations) {
   std::ostringstream m;
@@ -149,12 +146,8 @@ bool NewtonStepper::newton_update(UpdateStrategy& update, Solve& s, bool fresh_f
   const auto t0 = Clock::now();
   // A factorisation costs far more than a Krylov iteration: solve each linearisation well.
   const double forcing = std::clamp(0.1 * solver_.tolerance * s.reference / s.merit, 1e-6, 0.1);
-  // The contact problem's share of the force residual the step must reach, and no finer than a
-  // share of the residual the iteration starts from: the linearisation leaves more than that
-  // (inexact Newton), and frames of a fixed iteration count (tolerance 0) would otherwise sweep
-  // Gauss-Seidel down to the force floor.
-  const double force_tolerance =
-      0.1 * std::max({solver_.tolerance * s.reference, mechanics_.force_floor(), kContactForcing * s.merit});
+  // The contact problem's share of the force residual the step must reach.
+  const double force_tolerance = 0.1 * std::max(solver_.tolerance * s.reference, mechanics_.force_floor());
   // Captures `this` only: a std::function keeps that without an allocation.
   const Gmres::Operator jacobian = [this](const Eigen::VectorXd& v, Eigen::VectorXd& out) {
     const double h = 1e-8 * mechanics_.length_scale() / std::max(v.cwiseAbs().maxCoeff(), 1e-300);
