@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <array>
+#include <limits>
 #include <random>
 
 #include "liver_sim/model/corotational_tetra.h"
@@ -202,6 +203,28 @@ TEST(PolarRotation, FourAtOnceMatchOneByOne) {
   }
   EXPECT_LE(worst, 1e-14);  // round-off: R^T F is summed in another order than Eigen's product
   EXPECT_GT(lanes_converged_at_once, 40);
+}
+
+TEST(PolarRotation, ANonFiniteGradientGivesANonFiniteRotation) {
+  // A node at NaN or infinity must not come out of an element as a finite rotation: the step's and
+  // the analyses' finite checks rely on it. Mutation seen failing: polar_rotation's guard removed
+  // (Eigen's SVD of such an F reads memory it never set, valgrind; a finite R, or not, depending on
+  // what ran before).
+  for (const double bad : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+    Eigen::Matrix3d F = Eigen::Matrix3d::Identity();
+    F(1, 2) = bad;
+    EXPECT_FALSE(polar_rotation(F).allFinite());
+    Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
+    EXPECT_FALSE(polar_rotation(F, q).allFinite());
+    std::array<Eigen::Matrix3d, 4> lanes_F, R;
+    std::array<Eigen::Quaterniond, 4> lanes_q;
+    for (int l = 0; l < 4; ++l) {
+      lanes_F[l] = l == 2 ? F : Eigen::Matrix3d(Eigen::AngleAxisd(0.1 * l, Eigen::Vector3d::UnitZ()));
+      lanes_q[l] = Eigen::Quaterniond::Identity();
+    }
+    polar_rotations(lanes_F, {&lanes_q[0], &lanes_q[1], &lanes_q[2], &lanes_q[3]}, R);
+    for (int l = 0; l < 4; ++l) EXPECT_EQ(R[l].allFinite(), l != 2) << "lane " << l;
+  }
 }
 
 // Element forces and damping products four at a time against one at a time, on a rotated,

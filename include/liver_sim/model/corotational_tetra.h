@@ -19,7 +19,8 @@ using Vector12d = Eigen::Matrix<double, 12, 1>;
 // The matrix of w x . (cross product with w).
 Eigen::Matrix3d cross_matrix(const Eigen::Vector3d& w);
 
-// Rotation of the polar decomposition F = R S (a proper rotation also for inverted F).
+// Rotation of the polar decomposition F = R S (a proper rotation also for inverted F; NaN for a
+// non-finite F).
 Eigen::Matrix3d polar_rotation(const Eigen::Matrix3d& F);
 // The same, iterated from a nearby rotation q (the element's last one), which it updates:
 // about 3x faster when q is close, the same result to round-off.
