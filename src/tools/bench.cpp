@@ -320,7 +320,12 @@ int run_all(const Options& o) {
   const Eigen::VectorXd start = equilibrium(o.scene, o.overrides);
   if (press) {
     const Scene scene = liver_sim::load_scene(o.scene, o.overrides);
-    const double surface = bench::surface_height(liver_sim::load_scene_mesh(scene).T, start, press->above);
+    double surface;
+    try {
+      surface = bench::surface_height(liver_sim::load_scene_mesh(scene).T, start, press->above);
+    } catch (const std::runtime_error& e) {
+      throw std::runtime_error(o.instruments + ": press_sweep.above: " + e.what());
+    }
     loading.instruments = {bench::press_sweep_instrument(*press, surface)};
     if (!o.quiet) std::cerr << "bench: press_sweep: the surface lies at z = " << surface << " m under the probe\n";
   }

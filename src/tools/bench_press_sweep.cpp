@@ -7,24 +7,29 @@
 #include <stdexcept>
 
 #include "liver_sim/geometry/mesh.h"
+#include "liver_sim/geometry/node_positions.h"
 
 namespace liver_sim::bench {
 namespace {
 
-double number(const YAML::Node& map, const std::string& key, const std::string& where) {
-  const YAML::Node n = map[key];
-  if (!n || !n.IsScalar()) throw std::runtime_error(where + key + ": a number is required");
-  const double v = n.as<double>();
-  if (!std::isfinite(v)) throw std::runtime_error(where + key + ": not a finite number");
+double scalar(const YAML::Node& n, const std::string& where, const std::string& key) {
+  double v = NAN;
+  try {
+    if (n && n.IsScalar()) v = n.as<double>();
+  } catch (const YAML::Exception&) {  // not a number: said below
+  }
+  if (!std::isfinite(v)) throw std::runtime_error(where + key + ": a finite number is required");
   return v;
+}
+
+double number(const YAML::Node& map, const std::string& key, const std::string& where) {
+  return scalar(map[key], where, key);
 }
 
 std::pair<double, double> pair(const YAML::Node& map, const std::string& key, const std::string& where) {
   const YAML::Node n = map[key];
   if (!n || !n.IsSequence() || n.size() != 2) throw std::runtime_error(where + key + ": two numbers are required");
-  const double a = n[0].as<double>(), b = n[1].as<double>();
-  if (!std::isfinite(a) || !std::isfinite(b)) throw std::runtime_error(where + key + ": not finite numbers");
-  return {a, b};
+  return {scalar(n[0], where, key), scalar(n[1], where, key)};
 }
 
 void check(bool ok, const std::string& where, const std::string& what) {
@@ -46,9 +51,9 @@ std::optional<PressSweep> read_press_sweep(const std::string& path) {
   check(m.IsMap() && root.size() == 1, path + ": ", "press_sweep must be the file's only key, a map");
   const std::set<std::string> keys{"name", "type", "radius", "length", "above", "depth", "sweep", "period", "rate",
                                    "duration"};
-  for (const auto& kv : m)
-    check(keys.count(kv.first.as<std::string>()) > 0, where, kv.first.as<std::string>() + ": unknown key");
   try {
+    for (const auto& kv : m)
+      check(keys.count(kv.first.as<std::string>()) > 0, where, kv.first.as<std::string>() + ": unknown key");
     PressSweep p;
     p.instrument.name = m["name"] ? m["name"].as<std::string>() : "probe";
     const std::string type = m["type"] ? m["type"].as<std::string>() : "probe";
@@ -69,6 +74,9 @@ std::optional<PressSweep> read_press_sweep(const std::string& path) {
     check(p.rate > 0 && p.rate <= 1000, where, "rate: in (0, 1000] Hz");
     p.duration = number(m, "duration", where);
     check(p.duration > 0 && p.duration * p.rate < 10000, where, "duration: > 0 s, under 10000 keyframes");
+    // The scene's own bounds on an instrument (radius, length, name).
+    const std::string refused = validate(p.instrument);
+    check(refused.empty(), where, refused);
     return p;
   } catch (const YAML::Exception& e) {
     throw std::runtime_error(where + " " + e.what());
@@ -79,8 +87,7 @@ double surface_height(const Eigen::MatrixX4i& T, const Eigen::VectorXd& x, const
   const Eigen::MatrixX3i triangles = boundary_triangles(T);
   double height = -INFINITY;
   for (int t = 0; t < triangles.rows(); ++t) {
-    const Eigen::Vector3d a = x.segment<3>(3 * triangles(t, 0)), b = x.segment<3>(3 * triangles(t, 1)),
-                          c = x.segment<3>(3 * triangles(t, 2));
+    const Eigen::Vector3d a = node(x, triangles(t, 0)), b = node(x, triangles(t, 1)), c = node(x, triangles(t, 2));
     // Barycentric coordinates of xy in the triangle's shadow on the x-y plane.
     const Eigen::Vector2d e1 = (b - a).head<2>(), e2 = (c - a).head<2>(), r = xy - a.head<2>();
     const double det = e1.x() * e2.y() - e1.y() * e2.x();
@@ -90,8 +97,7 @@ double surface_height(const Eigen::MatrixX4i& T, const Eigen::VectorXd& x, const
     height = std::max(height, (1 - u - v) * a.z() + u * b.z() + v * c.z());
   }
   if (!std::isfinite(height))
-    throw std::runtime_error("press_sweep: no surface above (" + std::to_string(xy.x()) + ", " +
-                             std::to_string(xy.y()) + ") m");
+    throw std::runtime_error("no surface above (" + std::to_string(xy.x()) + ", " + std::to_string(xy.y()) + ") m");
   return height;
 }
 
