@@ -8,7 +8,7 @@
 
 #include "liver_sim/session/tracking_session.h"
 #include "scenarios.h"
-#include "session/files.h"
+#include "source_files.h"
 
 namespace liver_sim {
 namespace {

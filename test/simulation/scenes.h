@@ -4,13 +4,12 @@
 #include <string>
 
 #include "liver_sim/simulation/liver_model.h"
+#include "source_files.h"
 
 namespace liver_sim {
 
 using Fault = NewtonStepper::InjectedFault;
 using Type = InstrumentOptions::Type;
-
-inline std::string source(const std::string& file) { return std::string(LIVER_SIM_SOURCE_DIR) + "/" + file; }
 
 // An instrument of `type` pressing further into the top face of a 15 mm cube at every step of
 // the scene's pseudo-time, so that each step has work to do (tip positions in mm).
