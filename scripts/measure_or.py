@@ -84,10 +84,15 @@ def main():
     with session.lock:
         step0 = session.status.step
     statuses = []  # (state, text) of every ~status while the probe moves
-    step_times = {}  # step -> its wall time (s): a busy loop repeats the last step's status
-    rospy.Subscriber(f"{NODE}/status", SimulationStatus,
-                     lambda m: (statuses.append((m.state, m.text)), step_times.setdefault(m.step, m.step_time)),
-                     queue_size=100)
+    step_times = {}  # step -> its wall time (s), of the steps while the probe moves (a busy loop
+    # repeats the last step's status)
+
+    def on_status(m):
+        statuses.append((m.state, m.text))
+        if m.step > step0 and time.time() < start + args.duration:
+            step_times.setdefault(m.step, m.step_time)
+
+    rospy.Subscriber(f"{NODE}/status", SimulationStatus, on_status, queue_size=100)
     while time.time() < start + args.duration and not rospy.is_shutdown():
         now = time.time()
         if now >= next_pose:
