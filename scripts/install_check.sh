@@ -44,7 +44,9 @@ wait_for_master() { timeout 30 bash -c 'until rostopic list >/dev/null 2>&1; do 
 start() {
   local port; port=$(free_port)
   export ROS_MASTER_URI="http://127.0.0.1:$port"
-  roslaunch -p "$port" "$@" >"$RUN/$log" 2>&1 &
+  # Unbuffered: roslaunch's "process has finished" must reach the log when it is said, not when
+  # roslaunch exits (the wait for the demo below reads it).
+  PYTHONUNBUFFERED=1 roslaunch -p "$port" "$@" >"$RUN/$log" 2>&1 &
   launch=$!
   wait_for_master
 }

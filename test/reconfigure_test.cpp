@@ -85,8 +85,9 @@ class Reconfigure : public ::testing::Test {
     return p;
   }
 
-  // Publishes the tool's pose (the 3 mm rod's tip, m) every 50 ms until the model idles.
-  static liver_sim::SimulationStatus press(double x, double y, double depth) {
+  // Publishes the tool's pose (the 3 mm rod's tip, m) every 50 ms until the model idles, or for
+  // `seconds` when given.
+  static liver_sim::SimulationStatus press(double x, double y, double depth, double seconds = 0) {
     geometry_msgs::PoseStamped p;
     p.header.frame_id = "liver";
     p.pose.position.x = x;
@@ -99,6 +100,10 @@ class Reconfigure : public ::testing::Test {
       p.header.stamp = ros::Time::now();
       pose_pub_.publish(p);
     });
+    if (seconds > 0) {
+      wait_for([] { return false; }, seconds);
+      return status_;
+    }
     EXPECT_TRUE(wait_for([&] { return status_.header.stamp > sent + ros::Duration(0.3) && status_.state == "idle"; }, 120.0))
         << status_.state << ": " << status_.text << " residual " << status_.residual << " it " << status_.iterations;
     return status_;
@@ -166,7 +171,7 @@ TEST_F(Reconfigure, RatesBoundStepsAndMeshes) {
   wait_for([] { return false; }, 1.5);  // the last second's steps were at the former rate
   const unsigned before = meshes_;
   const ros::WallTime t0 = ros::WallTime::now();
-  press(0.0075, 0.004, 0.002);
+  press(0.0075, 0.004, 0.002, 3.0);  // at 5 Hz and one iteration a step the press would take ~15 s to settle
   const double elapsed = (ros::WallTime::now() - t0).toSec();
   for (const auto& s : statuses_) EXPECT_LE(s.rate, 6.0) << "steps in the last second at 5 Hz";
   EXPECT_LE(meshes_ - before, elapsed * 1.0 + 2) << elapsed << " s at 1 Hz";
