@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """bench's press_sweep instruments file: the surface it presses from is the one under the probe
 (the probe cube at rest: its top face, z = 15 mm, known from the scene), and each malformed file
-is refused with exit status 1 and a message naming the file and the key.
+is refused with exit status 1 and a message naming the file and the key (or the size bound).
 
 usage: test/scripts/bench_press_sweep_test.py BENCH SCENES_DIR   (ctest runs it)
 """
@@ -23,11 +23,11 @@ class PressSweep(unittest.TestCase):
         self.dir = tempfile.TemporaryDirectory(prefix="press_sweep")
         self.addCleanup(self.dir.cleanup)
 
-    def run_bench(self, **changes):
+    def run_bench(self, padding="", **changes):
         keys = dict(KEYS, **changes)
         path = os.path.join(self.dir.name, "press.yaml")
         with open(path, "w") as f:
-            f.write("press_sweep:\n" + "".join(f"  {k}: {v}\n" for k, v in keys.items() if v is not None))
+            f.write("press_sweep:\n" + "".join(f"  {k}: {v}\n" for k, v in keys.items() if v is not None) + padding)
         run = subprocess.run([BENCH, "--scene", CUBE, "--instruments", path, "--frames", "3", "--strategy",
                               "modified_newton:1:0"], capture_output=True, text=True, timeout=300)
         return path, run
@@ -49,6 +49,13 @@ class PressSweep(unittest.TestCase):
                 self.assertEqual(run.returncode, 1, run.stderr)
                 self.assertIn(path, run.stderr)
                 self.assertIn(key, run.stderr)
+
+    def test_a_file_over_1_mib_is_refused(self):
+        # Valid YAML (comments) past the bound load_instruments sets on instruments files.
+        path, run = self.run_bench(padding="# padding\n" * 120000)
+        self.assertEqual(run.returncode, 1, run.stderr)
+        self.assertIn(path, run.stderr)
+        self.assertIn("1 MiB", run.stderr)
 
 
 if __name__ == "__main__":
