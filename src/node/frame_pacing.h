@@ -1,9 +1,7 @@
 // When the node's frames start and when it publishes, in one place. A frame starts as soon as
 // an input arrives (a pose, a cloud, a command), so that a pose's latency is the frame's
 // compute, but frames at most ~rate a second on average (a faster stream is sampled: the
-// latest of each input wins). An input frame that starts up to three periods late (a long step
-// before it) keeps its slot: the frames after it may start back to back until on time again.
-// Without input a frame starts one period of ~rate after the last one (one and
+// latest of each input wins). Without input a frame starts one period of ~rate after the last one (one and
 // a half after one an input started): a step still converging goes on, tf-driven instruments
 // are read, stale ones noticed. The mesh
 // goes out after the frames that moved it, at most ~publish_rate a second on average (paced as
@@ -12,7 +10,6 @@
 
 #include <chrono>
 #include <functional>
-#include <thread>
 
 namespace liver_sim {
 
@@ -21,14 +18,8 @@ class FramePacing {
   using Clock = std::chrono::steady_clock;
   // Waits until an input arrives (true) or the deadline (false).
   using WaitForInput = std::function<bool(Clock::time_point)>;
-  // The time and the waits the pacing uses (a test's own clock in place of the wall clock).
-  struct Time {
-    std::function<Clock::time_point()> now = [] { return Clock::now(); };
-    std::function<void(Clock::time_point)> sleep_until = [](Clock::time_point t) { std::this_thread::sleep_until(t); };
-  };
 
-  FramePacing(double rate, double publish_rate);  // on the wall clock
-  FramePacing(double rate, double publish_rate, Time time);
+  FramePacing(double rate, double publish_rate);
   // From the next frame on (Hz).
   void set_rates(double rate, double publish_rate);
   double rate() const { return rate_; }
@@ -42,7 +33,6 @@ class FramePacing {
 
  private:
   Clock::duration period(double hz) const;
-  Time time_;
   double rate_, publish_rate_;
   Clock::time_point last_start_, last_input_start_;
   Clock::time_point frame_due_;  // when the next frame is due at the rate
