@@ -3,13 +3,12 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
-#include <fstream>
 #include <set>
-#include <sstream>
 #include <stdexcept>
 
 #include "liver_sim/geometry/mesh.h"
 #include "liver_sim/geometry/node_positions.h"
+#include "liver_sim/scene/scene.h"
 
 namespace liver_sim::bench {
 namespace {
@@ -41,15 +40,9 @@ void check(bool ok, const std::string& where, const std::string& what) {
 }  // namespace
 
 std::optional<PressSweep> read_press_sweep(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error(path + ": cannot open");
-  std::stringstream text;
-  text << in.rdbuf();
-  // The bound load_instruments sets on the same files: yaml-cpp recurses once per nesting level.
-  if (text.str().size() > (1u << 20)) throw std::runtime_error(path + ": larger than 1 MiB");
   YAML::Node root;
   try {
-    root = YAML::Load(text.str());
+    root = YAML::Load(read_scene_text(path));
   } catch (const YAML::Exception& e) {
     throw std::runtime_error(path + ": " + e.what());
   }

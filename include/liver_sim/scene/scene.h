@@ -44,6 +44,10 @@ struct Scene {
 // A relative mesh file is resolved against the scene file's folder.
 Scene load_scene(const std::string& path, const std::vector<std::string>& overrides = {});
 
+// The text of a file in the scene format (a scene, instruments). Throws SceneError naming the
+// file when it cannot be opened or is larger than 1 MiB.
+std::string read_scene_text(const std::string& path);
+
 // Instruments alone, from a YAML file with an `instruments:` list in the scene format (a
 // benchmark's scenario added to a scene). Throws SceneError naming the file and the key.
 std::vector<InstrumentOptions> load_instruments(const std::string& path);

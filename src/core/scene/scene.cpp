@@ -453,15 +453,21 @@ Scene parse_scene(const std::string& yaml, const std::string& base_dir, const st
   }
 }
 
-std::vector<InstrumentOptions> load_instruments(const std::string& path) {
-  const Reader reader(path);
+std::string read_scene_text(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw SceneError(path + ": cannot open");
   std::stringstream text;
   text << in.rdbuf();
-  if (text.str().size() > (1u << 20)) reader.fail("", "larger than 1 MiB");
+  // yaml-cpp recurses once per nesting level: bound what reaches it (scene files are small).
+  if (text.str().size() > (1u << 20)) throw SceneError(path + ": larger than 1 MiB");
+  return text.str();
+}
+
+std::vector<InstrumentOptions> load_instruments(const std::string& path) {
+  const Reader reader(path);
+  const std::string text = read_scene_text(path);
   try {
-    const YAML::Node root = YAML::Load(text.str());
+    const YAML::Node root = YAML::Load(text);
     if (!root.IsMap()) reader.fail("", "expected a map with an instruments list");
     reader.check_keys(root, "", {"instruments"});
     return reader.instruments(reader.required(root, "", "instruments"));
@@ -471,12 +477,8 @@ std::vector<InstrumentOptions> load_instruments(const std::string& path) {
 }
 
 Scene load_scene(const std::string& path, const std::vector<std::string>& overrides) {
-  std::ifstream in(path);
-  if (!in) throw SceneError(path + ": cannot open");
-  std::stringstream text;
-  text << in.rdbuf();
   const std::string dir = std::filesystem::absolute(path).parent_path().string();
-  return parse_scene(text.str(), dir, path, overrides);
+  return parse_scene(read_scene_text(path), dir, path, overrides);
 }
 
 }  // namespace liver_sim
