@@ -39,7 +39,7 @@ std::string fixed(double x, int digits) {
 // The mesh's own targets (smallest dihedral angle, element count), each missed one with its
 // value, the bound and why; empty when both are met.
 std::string missed_mesh_targets(const Options& o, const TetQuality& q, const TetMesh& mesh, const VolumeMeshReport& report,
-                                bool sized) {
+                                bool sized, bool resurfaced) {
   std::string missed;
   if (q.min_dihedral_deg < o.min_dihedral)
     missed = "smallest dihedral angle " + fixed(q.min_dihedral_deg, 2) + " deg, " +
@@ -52,11 +52,14 @@ std::string missed_mesh_targets(const Options& o, const TetQuality& q, const Tet
     std::ostringstream m;
     m << mesh.T.rows() << " tetrahedra for --elements " << o.elements << ": " << fixed(100 * std::abs(off), 0) << "% "
       << (off > 0 ? "over" : "under") << ", the bound is " << fixed(100 * kCountTolerance, 0) << "%";
+    // A re-surfaced boundary is coarsened as far as --coarsen-within allows; gmsh's patches, and
+    // a boundary left as remeshed, are refined to --max-deviation.
+    const std::string bound = resurfaced && coarsening_bound(o) > 0 ? "--coarsen-within" : "--max-deviation";
     if (off > 0)
-      m << " (the boundary needs " << boundary << " triangles to stay within --max-deviation of the surface, and the "
+      m << " (the boundary needs " << boundary << " triangles to stay within " << bound << " of the surface, and the "
         << "volume inside them, its edges up to " << fixed(report.element_size / o.unit, 1) << " " << o.unit_name
         << ", holds " << fixed(tetrahedra / boundary, 2) << " tetrahedra per boundary triangle: ask for about "
-        << mesh.T.rows() << " --elements or a larger --max-deviation)";
+        << mesh.T.rows() << " --elements or a larger " << bound << ")";
     missed = join(missed, m.str());
   }
   return missed;
@@ -157,6 +160,7 @@ ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::
   mesh_options.target_elements = o.elements;
   mesh_options.feature_angle = o.feature_angle;
   mesh_options.max_deviation = o.max_deviation > 0 ? o.max_deviation * o.unit : 0.5e-3;
+  mesh_options.coarsen_within = coarsening_bound(o);
   mesh_options.progress = say;
   const bool may_resurface = o.resurface == Resurface::Auto && o.label_map.empty();
   for (;;) {
@@ -178,14 +182,14 @@ ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::
     r.times.emplace_back("mesh", clock.lap());
     r.quality = tet_quality(r.mesh);
     if (r.quality.min_dihedral_deg < o.min_dihedral) {
-      r.slivers = repair_slivers(r.mesh, o.min_dihedral);
+      r.slivers = repair_slivers(r.mesh, o.min_dihedral, hausdorff_bound(o) - coarsening_bound(o));
       say("slivers: smallest dihedral angle " + std::to_string(r.slivers.before_deg) + " deg; " +
           std::to_string(r.slivers.peeled) + " peeled off the boundary, " + std::to_string(r.slivers.moved_nodes) +
           " nodes moved: " + std::to_string(r.slivers.after_deg) + " deg");
       r.quality = tet_quality(r.mesh);
       r.times.emplace_back("slivers", clock.lap());
     }
-    r.missed = missed_mesh_targets(o, r.quality, r.mesh, r.mesh_report, o.size > 0);
+    r.missed = missed_mesh_targets(o, r.quality, r.mesh, r.mesh_report, o.size > 0, r.resurfaced);
     if (r.missed.empty() || !may_resurface || r.resurfaced) break;
     resurface_input(r.input_name + ": " + r.missed);
   }

@@ -58,8 +58,6 @@ struct ModelMesh {
 // The element count's target: within 15% of --elements.
 constexpr double kCountTolerance = 0.15;
 
-// The Hausdorff distance's target, m: --max-hausdorff, 1.5 mm by default.
-inline double hausdorff_bound(const Options& o) { return o.max_hausdorff > 0 ? o.max_hausdorff * o.unit : 1.5e-3; }
 
 // Throws MeshError (bad input, with the file and the defect) or CommandLineError.
 ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::string&)>& say);

@@ -140,6 +140,13 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
                  "> 0 (input unit; default 1.5 mm)")
       ->option_text("D")
       ->check(tool::positive());
+  app.add_option("--coarsen-within", o->coarsen_within,
+                 "a re-surfaced boundary is coarsened while it stays within C of its surface (the\n"
+                 "fewest triangles for that distance); 0: kept as remeshed at --max-deviation; the\n"
+                 "sliver repair may then move the boundary by --max-hausdorff - C. In [0,\n"
+                 "--max-hausdorff) (input unit; default 0.7 --max-hausdorff)")
+      ->option_text("C")
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--max-volume-change", o->max_volume_change,
                  "target: the mesh's volume within PCT percent of the surface's, in (0, 100]\n"
                  "(default 1)")
@@ -215,6 +222,11 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
   o->resurface = resurface == "always" ? Resurface::Always : resurface == "never" ? Resurface::Never : Resurface::Auto;
   o->unit = o->unit_name == "mm" ? 1e-3 : o->unit_name == "cm" ? 1e-2 : 1.0;
   o->frame = frame == "RAS" ? PatientFrame::RAS : PatientFrame::LPS;
+  if (o->coarsen_within >= 0 && o->coarsen_within * o->unit >= hausdorff_bound(*o)) {
+    std::cerr << "make_model: --coarsen-within " << o->coarsen_within << " must be below --max-hausdorff ("
+              << hausdorff_bound(*o) / o->unit << " " << o->unit_name << "): the sliver repair needs the rest (see make_model --help)\n";
+    return tool::kBadCommandLine;
+  }
   for (const std::string& s : spheres) o->spheres.push_back(parse_sphere(s));
   for (const std::string& v : vessels) {
     const size_t eq = v.find('=');

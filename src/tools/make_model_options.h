@@ -28,6 +28,7 @@ struct Options {
   double feature_angle = 40;
   double max_deviation = -1;  // input unit; < 0: 0.5 mm
   double max_hausdorff = -1;  // input unit; < 0: 1.5 mm
+  double coarsen_within = -1;  // input unit; < 0: 0.7 of the Hausdorff bound
   double max_volume_change = 1;  // percent
   double merge_distance = 0;  // input unit
   bool largest_shell = false;
@@ -44,6 +45,15 @@ struct Options {
   bool quiet = false;
   double time_limit = 600;  // s
 };
+
+// The Hausdorff distance's target, m: --max-hausdorff, 1.5 mm by default.
+inline double hausdorff_bound(const Options& o) { return o.max_hausdorff > 0 ? o.max_hausdorff * o.unit : 1.5e-3; }
+
+// How far a re-surfaced boundary may be coarsened from its surface, m: --coarsen-within, else
+// 0.7 of the Hausdorff bound; the rest of the bound is the sliver repair's.
+inline double coarsening_bound(const Options& o) {
+  return o.coarsen_within >= 0 ? o.coarsen_within * o.unit : 0.7 * hausdorff_bound(o);
+}
 
 // Thrown past the command line when a setting turns out impossible for the input (e.g. --size
 // for a volume that would need too many tetrahedra): exit status 2, as a refused command line.

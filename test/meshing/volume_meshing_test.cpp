@@ -12,12 +12,14 @@
 #include <set>
 #include <sstream>
 
+#include "liver_sim/geometry/closest_points.h"
 #include "liver_sim/geometry/mesh_quality.h"
 #include "liver_sim/geometry/vessel_tree.h"
 #include "liver_sim/io/mesh_io.h"
 #include "liver_sim/io/surface_io.h"
 #include "liver_sim/io/vessel_io.h"
 #include "liver_sim/meshing/anatomy.h"
+#include "liver_sim/meshing/sliver_repair.h"
 #include "liver_sim/meshing/surface_deviation.h"
 #include "liver_sim/meshing/surface_repair.h"
 #include "liver_sim/meshing/volume_mesher.h"
@@ -30,6 +32,43 @@ namespace {
 using namespace meshing_test;
 
 // ---- meshing
+
+// A boundary sliver t thick: ridge a-b at height t over edge c-d, resting on two tetrahedra with
+// a common apex below, so that two of its faces are on the boundary and it can be peeled. Peeling
+// moves the boundary by t (from a-b down to c-d). Without a bound it is peeled; with a bound of
+// t / 2 it is kept, and while the repair opens it up no node leaves the original boundary's
+// triangles by more than t / 2 (measured against all of them). Kills: the peel's distance left
+// unchecked (tried: peeled under the bound), the boundary nodes' moves left free within a quarter
+// of their longest edge (tried: 0.20 off against 0.005).
+TEST(SliverRepair, TheBoundaryMovesNoFartherThanAllowed) {
+  const double t = 0.01;
+  TetMesh m;
+  m.V.resize(5, 3);
+  m.V << 0, 0, t, 1, 0, t, 0.5, 0.5, 0, 0.5, -0.5, 0, 0.5, 0, -1;  // a b c d e
+  m.T.resize(3, 4);
+  m.T << 0, 1, 2, 3, 0, 2, 3, 4, 1, 2, 3, 4;
+  for (int i = 0; i < 3; ++i)
+    if (signed_volume(m.V, m.T, i) < 0) std::swap(m.T(i, 0), m.T(i, 1));
+  TetMesh free = m;
+  const SliverRepairReport peeled = repair_slivers(free, 10);
+  EXPECT_EQ(peeled.peeled, 1);
+  EXPECT_EQ(free.T.rows(), 2);
+  TetMesh bounded = m;
+  const SliverRepairReport kept = repair_slivers(bounded, 10, 0.5 * t);
+  EXPECT_EQ(kept.peeled, 0);
+  ASSERT_EQ(bounded.T.rows(), 3);
+  const SurfaceMesh boundary{m.V, boundary_triangles(m.T)};
+  for (int i = 0; i < bounded.V.rows(); ++i) {
+    double off = 1e9;
+    for (int f = 0; f < boundary.F.rows(); ++f) {
+      const Eigen::Vector3d a = m.V.row(boundary.F(f, 0)), b = m.V.row(boundary.F(f, 1)), c = m.V.row(boundary.F(f, 2));
+      const Eigen::Vector3d p = bounded.V.row(i), w = closest_on_triangle(p, a, b, c);
+      off = std::min(off, (w[0] * a + w[1] * b + w[2] * c - p).norm());
+    }
+    EXPECT_LE(off, 0.5 * t + 1e-12) << "node " << i;
+  }
+  EXPECT_GT(kept.moved_nodes, 0);
+}
 
 // The generated mesh in the model, with the capsule, attached at the bare area, under gravity
 // (supine): converges, and the supports carry the weight rho g V of the meshed volume exactly.

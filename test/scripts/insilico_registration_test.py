@@ -29,7 +29,7 @@ class InsilicoRegistration(unittest.TestCase):
         cls.dir = tempfile.TemporaryDirectory(prefix="insilico")
         model = os.path.join(cls.dir.name, "model")
         subprocess.run([MAKE_MODEL, "--surface", os.path.join(DATA, "initial-surface.stl"), "--out", model,
-                        "--size", "10", "--max-deviation", "5", "--max-hausdorff", "5"], check=True, stdout=subprocess.DEVNULL)
+                        "--size", "10", "--max-deviation", "5", "--max-hausdorff", "5", "--coarsen-within", "0"], check=True, stdout=subprocess.DEVNULL)
         rows = os.path.join(cls.dir.name, "rows.csv")
         subprocess.run([REGISTER_INSILICO, "--scene", os.path.join(model, "liver.yaml"), "--data", DATA,
                         "--views", "xz,xz-hemi,yz", "--noise", "0.001", "--quiet", "--csv", rows], check=True)

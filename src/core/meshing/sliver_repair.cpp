@@ -4,8 +4,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <set>
+
+#include "liver_sim/geometry/closest_points.h"
 
 namespace liver_sim {
 namespace {
@@ -44,7 +47,7 @@ double min_dihedral_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b, cons
   return smallest;
 }
 
-SliverRepairReport repair_slivers(TetMesh& m, double target) {
+SliverRepairReport repair_slivers(TetMesh& m, double target, double max_boundary_move) {
   SliverRepairReport r;
   auto smallest = [&]() {
     double s = 180;
@@ -52,7 +55,30 @@ SliverRepairReport repair_slivers(TetMesh& m, double target) {
     return s;
   };
   r.before_deg = smallest();
-  for (int round = 0; round < 4 && smallest() < target; ++round) {
+  // The boundary as the mesher made it, per node its triangles: a boundary node may move along
+  // it (its moves add up over visits and rounds) but not farther than max_boundary_move off it.
+  std::vector<std::vector<Eigen::Matrix3d>> original_faces(m.V.rows());
+  {
+    std::map<Face, int> count;
+    for (int t = 0; t < m.T.rows(); ++t)
+      for (const auto& f : kFaces) ++count[sorted_face(m.T(t, f[0]), m.T(t, f[1]), m.T(t, f[2]))];
+    for (const auto& [f, n] : count) {
+      if (n != 1) continue;
+      Eigen::Matrix3d corners;
+      for (int k = 0; k < 3; ++k) corners.col(k) = m.V.row(f[k]).transpose();
+      for (const int v : f) original_faces[v].push_back(corners);
+    }
+  }
+  auto off_original = [&](int node) {
+    const Eigen::Vector3d p = m.V.row(node).transpose();
+    double d = std::numeric_limits<double>::infinity();
+    for (const Eigen::Matrix3d& c : original_faces[node]) {
+      const Eigen::Vector3d w = closest_on_triangle(p, c.col(0), c.col(1), c.col(2));
+      d = std::min(d, (c * w - p).norm());
+    }
+    return d;
+  };
+  for (int round = 0; round < 8 && smallest() < target; ++round) {
     // The boundary: faces of one tetrahedron, their edges and nodes.
     std::map<Face, int> face_count;
     for (int t = 0; t < m.T.rows(); ++t)
@@ -85,11 +111,21 @@ SliverRepairReport repair_slivers(TetMesh& m, double target) {
         // opposite nodes, which must not be on the boundary already.
         const int c = v[outer[0]], d = v[outer[1]];
         ok = !boundary_edges.count({std::min(c, d), std::max(c, d)});
+        // The surface moves from the outer faces' common edge a-b to c-d: at most their distance.
+        int a = 0;
+        while (a == outer[0] || a == outer[1]) ++a;
+        const int b = 6 - outer[0] - outer[1] - a;
+        const Eigen::Vector3d pa = m.V.row(v[a]), pb = m.V.row(v[b]), pc = m.V.row(c), pd = m.V.row(d);
+        const Eigen::Vector2d st = closest_between_segments(pa, pb, pc, pd);
+        ok = ok && (pa + st[0] * (pb - pa) - pc - st[1] * (pd - pc)).norm() <= max_boundary_move;
       } else if (outer.size() == 3) {
         // A cap: its apex (the node opposite the inner face) must belong to no other tetrahedron.
         int inner = 0;
         while (std::count(outer.begin(), outer.end(), inner)) ++inner;
-        ok = uses[v[inner]] == 1;
+        const Eigen::Vector3d apex = m.V.row(v[inner]), p0 = m.V.row(v[kFaces[inner][0]]),
+                              p1 = m.V.row(v[kFaces[inner][1]]), p2 = m.V.row(v[kFaces[inner][2]]);
+        const Eigen::Vector3d w = closest_on_triangle(apex, p0, p1, p2);
+        ok = uses[v[inner]] == 1 && (w[0] * p0 + w[1] * p1 + w[2] * p2 - apex).norm() <= max_boundary_move;
       }
       if (!ok) continue;
       keep[t] = 0;
@@ -146,7 +182,8 @@ SliverRepairReport repair_slivers(TetMesh& m, double target) {
             for (const double sign : {1.0, -1.0}) {
               const Eigen::RowVector3d old = m.V.row(node);
               m.V.row(node) += sign * step * directions.row(axis);
-              if ((m.V.row(node) - start).norm() > 0.25 * edge) {  // stays near where the mesher put it
+              // Stays near where the mesher put it; on the boundary, within the move allowed.
+              if ((m.V.row(node) - start).norm() > 0.25 * edge || (on_boundary[node] && off_original(node) > max_boundary_move)) {
                 m.V.row(node) = old;
                 continue;
               }

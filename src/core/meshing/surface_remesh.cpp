@@ -1,5 +1,6 @@
 #include "liver_sim/meshing/surface_remesh.h"
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
@@ -73,6 +74,53 @@ class Remesher {
       for (int s = 0; s < 2; ++s) smooth_tangentially();
     }
     flip_toward_valence_six();
+  }
+
+  // Coarsened while every new triangle stays within `tolerance` of the reference (sampled on a
+  // grid as fine as the tolerance, facing the same way as the reference there), no edge grows
+  // longer than the remeshing's longest (the boundary's triangles no larger than the elements
+  // inside) and no triangle gets a smallest angle under `smallest_angle` (rad) that it did not
+  // have. Quadric error metrics (Garland & Heckbert 1997) order the edge collapses and place the
+  // merged vertex, which is then moved along the normal of its new triangles until they enclose
+  // the volume the old ones did (Lindstrom & Turk 1998): off the reference, chords on both sides
+  // of a curved part rather than all inside. A pass collapses each vertex's edges at most once, so
+  // that the triangles grow evenly; passes repeat until one gains under 0.5%.
+  void coarsen(double tolerance, double smallest_angle) {
+    start_coarsening();
+    longest_edge_ = 4.0 / 3.0 * *std::max_element(ref_size_.begin(), ref_size_.end());
+    std::vector<char> touched(p_.size());
+    for (int pass = 0; pass < 30; ++pass) {
+      struct Candidate {
+        double key;
+        int a, b;
+      };
+      std::vector<Candidate> candidates;
+      int alive = 0;
+      for (size_t t = 0; t < tri_.size(); ++t) {
+        if (!alive_[t]) continue;
+        ++alive;
+        for (int k = 0; k < 3; ++k) {
+          const int a = tri_[t][k], b = tri_[t][(k + 1) % 3];
+          // On flat parts every collapse costs nothing: the shorter edges go first.
+          if (a < b) candidates.push_back({best_position(a, b).second + 1e-4 * (p_[a] - p_[b]).squaredNorm() *
+                                                                              (p_[a] - p_[b]).squaredNorm(),
+                                           a, b});
+        }
+      }
+      std::sort(candidates.begin(), candidates.end(), [](const Candidate& x, const Candidate& y) { return x.key < y.key; });
+      std::fill(touched.begin(), touched.end(), 0);
+      int collapsed = 0;
+      for (const Candidate& c : candidates) {
+        if (touched[c.a] || touched[c.b] || star_[c.a].empty() || star_[c.b].empty()) continue;
+        if (!try_collapse(c.a, c.b, tolerance, smallest_angle) && !try_collapse(c.b, c.a, tolerance, smallest_angle))
+          continue;
+        ++collapsed;
+        const int kept = star_[c.a].empty() ? c.b : c.a;
+        touched[kept] = 1;
+        for (const int v : neighbours(kept)) touched[v] = 1;
+      }
+      if (collapsed < 0.005 * alive) break;
+    }
   }
 
   SurfaceMesh result(RemeshReport* report) const {
@@ -226,11 +274,7 @@ class Remesher {
   // triangle turns over and no edge becomes too long. Returns whether it did.
   bool collapse_edge(int t, int a, int b) {
     const int u = across(t, a, b);
-    const int c = opposite(t, a, b), d = opposite(u, a, b);
-    if (star_[c].size() <= 3 || star_[d].size() <= 3) return false;  // would leave a vertex of two triangles
-    std::vector<int> na = neighbours(a), nb = neighbours(b);
-    for (const int v : na)  // link condition: a and b share exactly the neighbours c and d
-      if (v != c && v != d && v != b && std::find(nb.begin(), nb.end(), v) != nb.end()) return false;
+    if (!collapsible(t, u, a, b)) return false;
     // b at the new position, undone when a check fails.
     const Eigen::Vector3d old_a = p_[a], old_b = p_[b];
     const double old_size_b = size_[b];
@@ -262,6 +306,25 @@ class Remesher {
       p_[b] = old_b, size_[b] = old_size_b, hint_[b] = old_hint_b;
       return false;
     }
+    merge(t, u, a, b);
+    return true;
+  }
+
+  // Whether edge a-b may be collapsed: neither c nor d is left with two triangles, and a and b
+  // share exactly the neighbours c and d (the link condition: the surface stays manifold).
+  bool collapsible(int t, int u, int a, int b) const {
+    const int c = opposite(t, a, b), d = opposite(u, a, b);
+    if (star_[c].size() <= 3 || star_[d].size() <= 3) return false;
+    const std::vector<int> na = neighbours(a), nb = neighbours(b);
+    for (const int v : na)
+      if (v != c && v != d && v != b && std::find(nb.begin(), nb.end(), v) != nb.end()) return false;
+    return true;
+  }
+
+  // Edge a-b of triangles t and u collapsed into b (wherever b now lies): t and u die, a's other
+  // triangles pass to b.
+  void merge(int t, int u, int a, int b) {
+    const int c = opposite(t, a, b), d = opposite(u, a, b);
     alive_[t] = alive_[u] = 0;
     drop(star_[c], t), drop(star_[b], t), drop(star_[d], u), drop(star_[b], u);
     for (const int s : star_[a]) {
@@ -270,7 +333,6 @@ class Remesher {
       star_[b].push_back(s);
     }
     star_[a].clear();
-    return true;
   }
 
   void flip_toward_valence_six() {
@@ -349,6 +411,107 @@ class Remesher {
     }
   }
 
+  // Each vertex's quadric: the squared distances to the planes of the triangles around it,
+  // area-weighted.
+  void start_coarsening() {
+    quadric_.assign(p_.size(), Eigen::Matrix4d::Zero());
+    for (size_t t = 0; t < tri_.size(); ++t) {
+      if (!alive_[t]) continue;
+      const Eigen::Vector3d n = area_normal(p_[tri_[t][0]], p_[tri_[t][1]], p_[tri_[t][2]]);
+      const double area = 0.5 * n.norm();
+      if (!(area > 0)) continue;
+      const Eigen::Vector3d unit = n / n.norm();
+      const double offset = -unit.dot(p_[tri_[t][0]]);
+      Eigen::Matrix4d k;
+      k.topLeftCorner<3, 3>() = unit * unit.transpose();
+      k.topRightCorner<3, 1>() = offset * unit;
+      k.bottomLeftCorner<1, 3>() = offset * unit.transpose();
+      k(3, 3) = offset * offset;
+      for (const int v : tri_[t]) quadric_[v] += area * k;
+    }
+  }
+
+  // Where the merged vertex of edge a-b fits the two quadrics best, and that error: the
+  // minimiser of the summed quadric from the edge's middle, along the directions the quadric
+  // constrains (on a flat part only across it: the vertex stays on the plane).
+  std::pair<Eigen::Vector3d, double> best_position(int a, int b) const {
+    const Eigen::Matrix4d q = quadric_[a] + quadric_[b];
+    const Eigen::Vector3d middle = 0.5 * (p_[a] + p_[b]);
+    const Eigen::Matrix3d A = q.topLeftCorner<3, 3>();
+    const Eigen::Vector3d linear = q.topRightCorner<3, 1>();
+    const Eigen::Vector3d gradient = A * middle + linear;
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(A);
+    Eigen::Vector3d x = middle;
+    const double largest = eigen.eigenvalues().maxCoeff();
+    for (int i = 0; i < 3; ++i)
+      if (eigen.eigenvalues()[i] > 1e-3 * largest)
+        x -= eigen.eigenvectors().col(i) * (eigen.eigenvectors().col(i).dot(gradient) / eigen.eigenvalues()[i]);
+    if ((x - middle).norm() > (p_[a] - p_[b]).norm()) x = middle;
+    return {x, std::max(0.0, x.dot(A * x) + 2 * linear.dot(x) + q(3, 3))};
+  }
+
+  // Edge a-b collapsed into b at the position its quadrics ask for, when the checks pass.
+  bool try_collapse(int a, int b, double tolerance, double smallest_angle) {
+    int t = -1;
+    for (const int s : star_[a])
+      if (corner(tri_[s], b) >= 0) t = s;
+    if (t < 0) return false;
+    const int u = across(t, a, b);
+    if (u < 0 || !collapsible(t, u, a, b)) return false;
+    std::vector<int> around;  // the triangles the merged vertex will have
+    for (const int v : {a, b})
+      for (const int s : star_[v])
+        if (s != t && s != u && std::find(around.begin(), around.end(), s) == around.end()) around.push_back(s);
+    // The enclosed volume kept (Lindstrom & Turk 1998): the new triangles' share of it is linear
+    // in the merged vertex, g . x; the quadrics' choice is moved along g onto that plane.
+    double volume_before = 0;
+    Eigen::Vector3d g = Eigen::Vector3d::Zero();
+    for (const int s : star_[a]) volume_before += p_[tri_[s][0]].dot(p_[tri_[s][1]].cross(p_[tri_[s][2]])) / 6;
+    for (const int s : star_[b])
+      if (s != t && s != u) volume_before += p_[tri_[s][0]].dot(p_[tri_[s][1]].cross(p_[tri_[s][2]])) / 6;
+    for (const int s : around) {
+      const Tri& f = tri_[s];
+      const int k = corner(f, a) >= 0 ? corner(f, a) : corner(f, b);
+      g += p_[f[(k + 1) % 3]].cross(p_[f[(k + 2) % 3]]) / 6;
+    }
+    Eigen::Vector3d x = best_position(a, b).first;
+    if (g.squaredNorm() > 0) x += (volume_before - g.dot(x)) / g.squaredNorm() * g;
+    std::vector<std::array<Eigen::Vector3d, 3>> moved(around.size());
+    for (size_t i = 0; i < around.size(); ++i) {
+      const Tri& f = tri_[around[i]];
+      for (int k = 0; k < 3; ++k) moved[i][k] = f[k] == a || f[k] == b ? x : p_[f[k]];
+      for (int k = 0; k < 3; ++k)
+        if ((moved[i][k] - moved[i][(k + 1) % 3]).norm() > longest_edge_) return false;
+      const Eigen::Vector3d before = area_normal(p_[f[0]], p_[f[1]], p_[f[2]]);
+      const Eigen::Vector3d after = area_normal(moved[i][0], moved[i][1], moved[i][2]);
+      const double angle = min_angle(moved[i][0], moved[i][1], moved[i][2]);
+      if (after.dot(before) < std::cos(30 * M_PI / 180) * after.norm() * before.norm() ||
+          (angle < smallest_angle && angle < min_angle(p_[f[0]], p_[f[1]], p_[f[2]])))
+        return false;
+      if (!near_reference(moved[i], after.normalized(), tolerance)) return false;
+    }
+    p_[b] = x;
+    quadric_[b] += quadric_[a];
+    merge(t, u, a, b);
+    return true;
+  }
+
+  // Whether triangle `q` lies within `tolerance` of the reference, facing the same way (a
+  // triangle reaching across a thin part to the other sheet does not), sampled on a grid of
+  // sub-triangles up to `tolerance` apart.
+  bool near_reference(const std::array<Eigen::Vector3d, 3>& q, const Eigen::Vector3d& normal, double tolerance) const {
+    const double longest = std::max({(q[1] - q[0]).norm(), (q[2] - q[1]).norm(), (q[0] - q[2]).norm()});
+    const int k = std::clamp(static_cast<int>(std::ceil(longest / tolerance)), 1, 12);
+    for (int i = 0; i <= k; ++i)
+      for (int j = 0; i + j <= k; ++j) {
+        const Eigen::Vector3d point = q[0] + (q[1] - q[0]) * i / k + (q[2] - q[0]) * j / k;
+        const SurfaceLocator::Hit hit = locator_.closest(point, tolerance, -1);
+        if (hit.triangle < 0 || hit.distance > tolerance || hit.normal.dot(normal) <= 0) return false;
+      }
+    const SurfaceLocator::Hit middle = locator_.closest((q[0] + q[1] + q[2]) / 3, tolerance, -1);
+    return middle.triangle >= 0 && middle.distance <= tolerance && middle.normal.dot(normal) > 0;
+  }
+
   const SurfaceMesh& ref_;
   const std::vector<double>& ref_size_;
   const double deviation_, min_length_;
@@ -361,6 +524,8 @@ class Remesher {
   std::vector<Tri> tri_;
   std::vector<char> alive_;
   std::vector<std::vector<int>> star_;  // live triangles around each vertex
+  std::vector<Eigen::Matrix4d> quadric_;  // coarsening: each vertex's quadric
+  double longest_edge_ = 0;
 };
 
 }  // namespace
@@ -390,6 +555,7 @@ SurfaceMesh remesh_surface(const SurfaceMesh& reference, const std::vector<doubl
   }
   Remesher r(reference, size, options.deviation, options.min_size, cap, origin);
   r.run(options.iterations);
+  if (options.coarsen_within > 0) r.coarsen(options.coarsen_within, options.coarsen_min_angle * M_PI / 180);
   return r.result(report);
 }
 

@@ -232,6 +232,7 @@ TetMesh remesh_and_fill(const SurfaceMesh& surface, const std::string& origin, c
     RemeshOptions remesh;
     remesh.deviation = options.max_deviation;
     remesh.min_size = shortest;
+    remesh.coarsen_within = options.coarsen_within;
     std::vector<double> sizes = curvature_sizes(surface, options.max_deviation, shortest, h, options.gradation);
     SurfaceMesh boundary;
     // Where the remeshed sheets still cross (a gap the thickness bound underestimated), shorter
