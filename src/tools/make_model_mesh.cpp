@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include "liver_sim/io/label_map_io.h"
@@ -59,7 +60,8 @@ std::string missed_mesh_targets(const Options& o, const TetQuality& q, const Tet
       m << " (the boundary needs " << boundary << " triangles to stay within " << bound << " of the surface, and the "
         << "volume inside them, its edges up to " << fixed(report.element_size / o.unit, 1) << " " << o.unit_name
         << ", holds " << fixed(tetrahedra / boundary, 2) << " tetrahedra per boundary triangle: ask for about "
-        << mesh.T.rows() << " --elements or a larger " << bound << ")";
+        << mesh.T.rows() << " --elements or a larger " << bound
+        << (bound == "--coarsen-within" ? " (below --max-hausdorff: the sliver repair gets the rest)" : "") << ")";
     missed = join(missed, m.str());
   }
   return missed;
@@ -182,7 +184,10 @@ ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::
     r.times.emplace_back("mesh", clock.lap());
     r.quality = tet_quality(r.mesh);
     if (r.quality.min_dihedral_deg < o.min_dihedral) {
-      r.slivers = repair_slivers(r.mesh, o.min_dihedral, hausdorff_bound(o) - coarsening_bound(o));
+      // A coarsened boundary has used that much of the Hausdorff bound: the repair gets the rest.
+      const bool coarsened = r.resurfaced && coarsening_bound(o) > 0;
+      r.slivers = repair_slivers(r.mesh, o.min_dihedral,
+                                 coarsened ? hausdorff_bound(o) - coarsening_bound(o) : std::numeric_limits<double>::infinity());
       say("slivers: smallest dihedral angle " + std::to_string(r.slivers.before_deg) + " deg; " +
           std::to_string(r.slivers.peeled) + " peeled off the boundary, " + std::to_string(r.slivers.moved_nodes) +
           " nodes moved: " + std::to_string(r.slivers.after_deg) + " deg");

@@ -141,12 +141,12 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
       ->option_text("D")
       ->check(tool::positive());
   app.add_option("--coarsen-within", o->coarsen_within,
-                 "a re-surfaced boundary is coarsened while it stays within C of its surface (the\n"
-                 "fewest triangles for that distance); 0: kept as remeshed at --max-deviation; the\n"
-                 "sliver repair may then move the boundary by --max-hausdorff - C. In [0,\n"
+                 "a re-surfaced boundary is coarsened while it stays within C of its surface (few\n"
+                 "triangles for that distance); 0: kept as remeshed at --max-deviation; the sliver\n"
+                 "repair may then move a coarsened boundary by --max-hausdorff - C. In [0,\n"
                  "--max-hausdorff) (input unit; default 0.7 --max-hausdorff)")
       ->option_text("C")
-      ->check(CLI::NonNegativeNumber);
+      ->check(tool::non_negative());
   app.add_option("--max-volume-change", o->max_volume_change,
                  "target: the mesh's volume within PCT percent of the surface's, in (0, 100]\n"
                  "(default 1)")

@@ -147,11 +147,11 @@ TEST(SurfaceRemesh, SizesFollowCurvatureAndThickness) {
 
 // The phantom re-surfaced, remeshed at 0.5 mm deviation, then coarsened within 1 mm: measured
 // both ways by dense sampling (surface_deviation, 0.25 mm), not the coarsening's own points, it
-// stays within the tolerance (plus a tenth for what its sampling 1 mm apart misses); it keeps
-// under 60% of the triangles, stays closed, manifold and not crossing itself, no triangle thinner
-// than the bound (or than the remeshing made), and encloses the remeshed surface's volume (each
-// collapse keeps it, exactly: the merged vertex on the plane where the new triangles enclose what
-// the old ones did). Kills: the merged vertex's volume-keeping move dropped (tried: 0.43% less
+// stays within the tolerance (plus a tenth for what its sampling, about 2 mm apart on these
+// triangles, misses); it keeps under 60% of the triangles, stays closed, manifold and not
+// crossing itself, no triangle thinner than the bound (or than the remeshing made), and encloses
+// the remeshed surface's volume (each collapse keeps it, exactly: the merged vertex on the plane
+// where the new triangles enclose what the old ones did). Kills: the merged vertex's volume-keeping move dropped (tried: 0.43% less
 // volume), the angle bound dropped (tried: a 6.5 degree triangle), the new triangles' distance to
 // the reference unchecked (tried: 1.12 mm). Not caught on this surface: the check that a new
 // triangle faces the way the reference does.

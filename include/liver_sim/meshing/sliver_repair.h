@@ -22,10 +22,10 @@ struct SliverRepairReport {
 // edge at most) to where the smallest dihedral angle of its tetrahedra is largest (a pattern
 // search; every tetrahedron stays positive). Nodes no tetrahedron uses
 // any more are dropped. The result may still miss the target: the caller checks it.
-// `max_boundary_move` (m): how far the boundary may leave the one the mesher made: a peel moves
-// it by the distance between the sliver's outer ridge and its inner edge (or its cap's apex from
-// its inner face), a boundary node may slide along its original triangles but stay within this
-// of them. The caller measures what the boundary's triangles then deviate.
+// `max_boundary_move` (m): how far the boundary may leave the one the mesher made: a peel only
+// where the faces it lays bare lie within this of the original boundary around the sliver
+// (sampled), a boundary node may slide along its original triangles but stay within this of
+// them. The caller measures what the boundary's triangles then deviate.
 SliverRepairReport repair_slivers(TetMesh& mesh, double min_dihedral_deg,
                                   double max_boundary_move = std::numeric_limits<double>::infinity());
 

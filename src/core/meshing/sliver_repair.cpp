@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <initializer_list>
 #include <limits>
 #include <map>
 #include <set>
@@ -69,14 +70,26 @@ SliverRepairReport repair_slivers(TetMesh& m, double target, double max_boundary
       for (const int v : f) original_faces[v].push_back(corners);
     }
   }
-  auto off_original = [&](int node) {
-    const Eigen::Vector3d p = m.V.row(node).transpose();
+  // How far point p lies from the original boundary's triangles at `nodes`.
+  auto off_original = [&](const Eigen::Vector3d& p, std::initializer_list<int> nodes) {
     double d = std::numeric_limits<double>::infinity();
-    for (const Eigen::Matrix3d& c : original_faces[node]) {
-      const Eigen::Vector3d w = closest_on_triangle(p, c.col(0), c.col(1), c.col(2));
-      d = std::min(d, (c * w - p).norm());
-    }
+    for (const int node : nodes)
+      for (const Eigen::Matrix3d& c : original_faces[node]) {
+        const Eigen::Vector3d w = closest_on_triangle(p, c.col(0), c.col(1), c.col(2));
+        d = std::min(d, (c * w - p).norm());
+      }
     return d;
+  };
+  // Whether the triangle a peel lays bare stays within the bound of the original boundary around
+  // the sliver's nodes (sampled on a grid of 4 x 4 sub-triangles): a later round's peel under an
+  // earlier one adds up.
+  auto peel_allowed = [&](int a, int b, int c, const Eigen::Vector4i& v) {
+    const Eigen::Vector3d pa = m.V.row(a), pb = m.V.row(b), pc = m.V.row(c);
+    for (int i = 0; i <= 4; ++i)
+      for (int j = 0; i + j <= 4; ++j)
+        if (off_original(pa + (pb - pa) * i / 4.0 + (pc - pa) * j / 4.0, {v[0], v[1], v[2], v[3]}) > max_boundary_move)
+          return false;
+    return true;
   };
   for (int round = 0; round < 8 && smallest() < target; ++round) {
     // The boundary: faces of one tetrahedron, their edges and nodes.
@@ -110,22 +123,16 @@ SliverRepairReport repair_slivers(TetMesh& m, double target, double max_boundary
         // The two inner faces become boundary; they meet at the edge joining the outer faces'
         // opposite nodes, which must not be on the boundary already.
         const int c = v[outer[0]], d = v[outer[1]];
-        ok = !boundary_edges.count({std::min(c, d), std::max(c, d)});
-        // The surface moves from the outer faces' common edge a-b to c-d: at most their distance.
         int a = 0;
         while (a == outer[0] || a == outer[1]) ++a;
         const int b = 6 - outer[0] - outer[1] - a;
-        const Eigen::Vector3d pa = m.V.row(v[a]), pb = m.V.row(v[b]), pc = m.V.row(c), pd = m.V.row(d);
-        const Eigen::Vector2d st = closest_between_segments(pa, pb, pc, pd);
-        ok = ok && (pa + st[0] * (pb - pa) - pc - st[1] * (pd - pc)).norm() <= max_boundary_move;
+        ok = !boundary_edges.count({std::min(c, d), std::max(c, d)}) && peel_allowed(v[a], c, d, v) &&
+             peel_allowed(v[b], c, d, v);
       } else if (outer.size() == 3) {
         // A cap: its apex (the node opposite the inner face) must belong to no other tetrahedron.
         int inner = 0;
         while (std::count(outer.begin(), outer.end(), inner)) ++inner;
-        const Eigen::Vector3d apex = m.V.row(v[inner]), p0 = m.V.row(v[kFaces[inner][0]]),
-                              p1 = m.V.row(v[kFaces[inner][1]]), p2 = m.V.row(v[kFaces[inner][2]]);
-        const Eigen::Vector3d w = closest_on_triangle(apex, p0, p1, p2);
-        ok = uses[v[inner]] == 1 && (w[0] * p0 + w[1] * p1 + w[2] * p2 - apex).norm() <= max_boundary_move;
+        ok = uses[v[inner]] == 1 && peel_allowed(v[kFaces[inner][0]], v[kFaces[inner][1]], v[kFaces[inner][2]], v);
       }
       if (!ok) continue;
       keep[t] = 0;
@@ -183,7 +190,7 @@ SliverRepairReport repair_slivers(TetMesh& m, double target, double max_boundary
               const Eigen::RowVector3d old = m.V.row(node);
               m.V.row(node) += sign * step * directions.row(axis);
               // Stays near where the mesher put it; on the boundary, within the move allowed.
-              if ((m.V.row(node) - start).norm() > 0.25 * edge || (on_boundary[node] && off_original(node) > max_boundary_move)) {
+              if ((m.V.row(node) - start).norm() > 0.25 * edge || (on_boundary[node] && off_original(m.V.row(node).transpose(), {node}) > max_boundary_move)) {
                 m.V.row(node) = old;
                 continue;
               }

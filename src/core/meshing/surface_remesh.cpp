@@ -77,14 +77,15 @@ class Remesher {
   }
 
   // Coarsened while every new triangle stays within `tolerance` of the reference (sampled on a
-  // grid as fine as the tolerance, facing the same way as the reference there), no edge grows
+  // grid of sub-triangles the tolerance across, 12 along an edge at most, facing the same way as
+  // the reference there), no edge grows
   // longer than the remeshing's longest (the boundary's triangles no larger than the elements
   // inside) and no triangle gets a smallest angle under `smallest_angle` (rad) that it did not
   // have. Quadric error metrics (Garland & Heckbert 1997) order the edge collapses and place the
   // merged vertex, which is then moved along the normal of its new triangles until they enclose
   // the volume the old ones did (Lindstrom & Turk 1998): off the reference, chords on both sides
   // of a curved part rather than all inside. A pass collapses each vertex's edges at most once, so
-  // that the triangles grow evenly; passes repeat until one gains under 0.5%.
+  // that the triangles grow evenly; passes repeat until one removes under 1% of the triangles.
   void coarsen(double tolerance, double smallest_angle) {
     start_coarsening();
     longest_edge_ = 4.0 / 3.0 * *std::max_element(ref_size_.begin(), ref_size_.end());
@@ -112,8 +113,7 @@ class Remesher {
       int collapsed = 0;
       for (const Candidate& c : candidates) {
         if (touched[c.a] || touched[c.b] || star_[c.a].empty() || star_[c.b].empty()) continue;
-        if (!try_collapse(c.a, c.b, tolerance, smallest_angle) && !try_collapse(c.b, c.a, tolerance, smallest_angle))
-          continue;
+        if (!try_collapse(c.a, c.b, tolerance, smallest_angle)) continue;
         ++collapsed;
         const int kept = star_[c.a].empty() ? c.b : c.a;
         touched[kept] = 1;
@@ -498,7 +498,7 @@ class Remesher {
 
   // Whether triangle `q` lies within `tolerance` of the reference, facing the same way (a
   // triangle reaching across a thin part to the other sheet does not), sampled on a grid of
-  // sub-triangles up to `tolerance` apart.
+  // sub-triangles `tolerance` across (at most 12 along an edge).
   bool near_reference(const std::array<Eigen::Vector3d, 3>& q, const Eigen::Vector3d& normal, double tolerance) const {
     const double longest = std::max({(q[1] - q[0]).norm(), (q[2] - q[1]).norm(), (q[0] - q[2]).norm()});
     const int k = std::clamp(static_cast<int>(std::ceil(longest / tolerance)), 1, 12);
