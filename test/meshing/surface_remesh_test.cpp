@@ -147,14 +147,15 @@ TEST(SurfaceRemesh, SizesFollowCurvatureAndThickness) {
 
 // The phantom re-surfaced, remeshed at 0.5 mm deviation, then coarsened within 1 mm: measured
 // both ways by dense sampling (surface_deviation, 0.25 mm), not the coarsening's own points, it
-// stays within the tolerance (plus a tenth for what its sampling, about 2 mm apart on these
-// triangles, misses); it keeps under 60% of the triangles, stays closed, manifold and not
-// crossing itself, no triangle thinner than the bound (or than the remeshing made), and encloses
-// the remeshed surface's volume (each collapse keeps it, exactly: the merged vertex on the plane
-// where the new triangles enclose what the old ones did). Kills: the merged vertex's volume-keeping move dropped (tried: 0.43% less
-// volume), the angle bound dropped (tried: a 6.5 degree triangle), the new triangles' distance to
-// the reference unchecked (tried: 1.12 mm). Not caught on this surface: the check that a new
-// triangle faces the way the reference does.
+// stays within the tolerance (plus a tenth for what its sampling, the tolerance apart at most,
+// misses); it keeps under 80% of the triangles (its edges no longer than 12 mm), stays closed,
+// manifold and not crossing itself, no triangle thinner than the bound (or than the remeshing
+// made), and encloses the remeshed surface's volume (each collapse keeps it, exactly: the merged
+// vertex on the plane where the new triangles enclose what the old ones did). Kills: the merged
+// vertex's volume-keeping move dropped (tried: 0.03% less volume), the angle bound dropped
+// (tried: an 11 degree triangle), the new triangles' distance to the reference unchecked (tried:
+// 1.12 mm, narrowly). Not caught on this surface: the check that a new triangle faces the way the
+// reference does.
 TEST(SurfaceRemesh, CoarseningStaysWithinItsToleranceBothWays) {
   ResurfaceOptions coarse;
   coarse.voxel_size = coarse.smoothing = 2e-3;
@@ -170,7 +171,7 @@ TEST(SurfaceRemesh, CoarseningStaysWithinItsToleranceBothWays) {
   const SurfaceDeviation distance = surface_deviation(level_set, coarsened, 0.25e-3);
   EXPECT_LT(distance.a_to_b.max, 1.1 * tolerance) << "at " << distance.a_to_b.farthest.transpose();
   EXPECT_LT(distance.b_to_a.max, 1.1 * tolerance) << "at " << distance.b_to_a.farthest.transpose();
-  EXPECT_LT(coarsened.F.rows(), 0.6 * fine.F.rows());
+  EXPECT_LT(coarsened.F.rows(), 0.8 * fine.F.rows()) << "of " << fine.F.rows();
   SurfaceRepairs repairs;
   const SurfaceMesh checked = repair_surface(coarsened, "coarsened phantom", {}, &repairs);
   EXPECT_EQ(checked.F.rows(), coarsened.F.rows());

@@ -77,18 +77,19 @@ class Remesher {
   }
 
   // Coarsened while every new triangle stays within `tolerance` of the reference (sampled on a
-  // grid of sub-triangles the tolerance across, 12 along an edge at most, facing the same way as
-  // the reference there), no edge grows
-  // longer than the remeshing's longest (the boundary's triangles no larger than the elements
-  // inside) and no triangle gets a smallest angle under `smallest_angle` (rad) that it did not
-  // have. Quadric error metrics (Garland & Heckbert 1997) order the edge collapses and place the
-  // merged vertex, which is then moved along the normal of its new triangles until they enclose
-  // the volume the old ones did (Lindstrom & Turk 1998): off the reference, chords on both sides
-  // of a curved part rather than all inside. A pass collapses each vertex's edges at most once, so
-  // that the triangles grow evenly; passes repeat until one removes under 1% of the triangles.
+  // grid of sub-triangles the tolerance across, facing the same way as the reference there), no
+  // edge grows longer than the remeshing's longest or 12 tolerances, and no triangle gets a
+  // smallest angle under `smallest_angle` (rad) that it did not have. Quadric error metrics
+  // (Garland & Heckbert 1997) order the edge collapses and place the merged vertex, which is then
+  // moved along the normal of its new triangles until they enclose the volume the old ones did
+  // (Lindstrom & Turk 1998): off the reference, chords on both sides of a curved part rather than
+  // all inside. A pass collapses each vertex's edges at most once, so that the triangles grow
+  // evenly; passes repeat until one removes under 1% of the triangles.
   void coarsen(double tolerance, double smallest_angle) {
     start_coarsening();
-    longest_edge_ = 4.0 / 3.0 * *std::max_element(ref_size_.begin(), ref_size_.end());
+    // No edge past the remeshing's longest (the boundary's triangles no larger than the elements
+    // inside) nor past 12 tolerances (sampled no sparser than the tolerance).
+    longest_edge_ = std::min(4.0 / 3.0 * *std::max_element(ref_size_.begin(), ref_size_.end()), 12 * tolerance);
     std::vector<char> touched(p_.size());
     for (int pass = 0; pass < 30; ++pass) {
       struct Candidate {
@@ -498,7 +499,7 @@ class Remesher {
 
   // Whether triangle `q` lies within `tolerance` of the reference, facing the same way (a
   // triangle reaching across a thin part to the other sheet does not), sampled on a grid of
-  // sub-triangles `tolerance` across (at most 12 along an edge).
+  // sub-triangles `tolerance` across (12 along an edge at most: coarsening makes none longer).
   bool near_reference(const std::array<Eigen::Vector3d, 3>& q, const Eigen::Vector3d& normal, double tolerance) const {
     const double longest = std::max({(q[1] - q[0]).norm(), (q[2] - q[1]).norm(), (q[0] - q[2]).norm()});
     const int k = std::clamp(static_cast<int>(std::ceil(longest / tolerance)), 1, 12);
