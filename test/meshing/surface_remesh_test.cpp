@@ -1,4 +1,4 @@
-// A re-surfaced segmentation's way to tetrahedra (surface_remesh.h, fill_volume): sizes from
+// A re-surfaced segmentation's way to tetrahedra (surface_remesh.h, surface_coarsen.h, fill_volume): sizes from
 // curvature and thickness, the surface remeshed at them, the volume filled inside it as it is.
 // References: a sphere's radius and curvature, a slab's thickness, the weight the supports carry.
 // Each test names the deliberate mutation of the code it guards that it was seen to fail on.
@@ -13,6 +13,7 @@
 #include "liver_sim/geometry/mesh_quality.h"
 #include "liver_sim/meshing/anatomy.h"
 #include "liver_sim/meshing/resurface.h"
+#include "liver_sim/meshing/surface_coarsen.h"
 #include "liver_sim/meshing/surface_deviation.h"
 #include "liver_sim/meshing/surface_remesh.h"
 #include "liver_sim/meshing/surface_repair.h"
@@ -166,8 +167,10 @@ TEST(SurfaceRemesh, CoarseningStaysWithinItsToleranceBothWays) {
   const std::vector<double> sizes = curvature_sizes(level_set, d, 4 * d, h, 0.3);
   RemeshReport fine_report, coarse_report;
   const SurfaceMesh fine = remesh_surface(level_set, sizes, o, "phantom", &fine_report);
-  o.coarsen_within = tolerance;
-  const SurfaceMesh coarsened = remesh_surface(level_set, sizes, o, "phantom", &coarse_report);
+  CoarsenOptions c;
+  c.tolerance = tolerance;
+  c.max_edge = 4.0 / 3.0 * h;
+  const SurfaceMesh coarsened = coarsen_surface(fine, level_set, c, "phantom", &coarse_report);
   const SurfaceDeviation distance = surface_deviation(level_set, coarsened, 0.25e-3);
   EXPECT_LT(distance.a_to_b.max, 1.1 * tolerance) << "at " << distance.a_to_b.farthest.transpose();
   EXPECT_LT(distance.b_to_a.max, 1.1 * tolerance) << "at " << distance.b_to_a.farthest.transpose();
@@ -175,7 +178,7 @@ TEST(SurfaceRemesh, CoarseningStaysWithinItsToleranceBothWays) {
   SurfaceRepairs repairs;
   const SurfaceMesh checked = repair_surface(coarsened, "coarsened phantom", {}, &repairs);
   EXPECT_EQ(checked.F.rows(), coarsened.F.rows());
-  EXPECT_GE(coarse_report.min_angle_deg, std::min(o.coarsen_min_angle, fine_report.min_angle_deg) - 1e-9);
+  EXPECT_GE(coarse_report.min_angle_deg, std::min(c.min_angle, fine_report.min_angle_deg) - 1e-9);
   EXPECT_NEAR(enclosed_volume(coarsened), enclosed_volume(fine), 1e-9 * enclosed_volume(fine));
 }
 

@@ -23,9 +23,10 @@ struct SliverRepairReport {
 // search; every tetrahedron stays positive). Nodes no tetrahedron uses
 // any more are dropped. The result may still miss the target: the caller checks it.
 // `max_boundary_move` (m): how far the boundary may leave the one the mesher made: a peel only
-// where the faces it lays bare lie within this of the original boundary around the sliver
-// (sampled), a boundary node may slide along its original triangles but stay within this of
-// them. The caller measures what the boundary's triangles then deviate.
+// where the surface it removes lies within this of the faces it lays bare (the ridge from the
+// inner edge, the cap's apex from its inner face) and those faces within this of the original
+// boundary around the sliver (sampled); a boundary node may slide along its original triangles
+// but stay within this of them. The caller measures what the boundary's triangles then deviate.
 SliverRepairReport repair_slivers(TetMesh& mesh, double min_dihedral_deg,
                                   double max_boundary_move = std::numeric_limits<double>::infinity());
 

@@ -25,11 +25,6 @@ struct RemeshOptions {
   // 0: the reference's vertices plus 16 A / L^2 over its triangles, A the area, L the size
   // there or min_size where that is shorter.
   size_t max_vertices = 0;
-  // m, > 0: after the remeshing, edges collapsed while every new triangle stays within this of
-  // the reference (sampled on it), so that the surface keeps few triangles for that distance.
-  // 0: not coarsened.
-  double coarsen_within = 0;
-  double coarsen_min_angle = 25;  // degrees, (0, 60): no collapse makes a triangle thinner than this
 };
 
 struct RemeshReport {

@@ -29,7 +29,7 @@ struct VolumeMeshOptions {
   bool remesh_boundary = false;
   double gradation = 0.3;  // remesh_boundary: sizes grow at most this much per length along the surface
   // remesh_boundary, m, >= 0: the remeshed boundary then coarsened while it stays within this of
-  // the surface (RemeshOptions::coarsen_within); 0: not coarsened
+  // the surface (surface_coarsen.h; its edges up to 4/3 of the largest size); 0: not coarsened
   double coarsen_within = 0;
   std::function<void(const std::string&)> progress;  // one line per stage, e.g. "meshing volume"
 };

@@ -126,13 +126,24 @@ SliverRepairReport repair_slivers(TetMesh& m, double target, double max_boundary
         int a = 0;
         while (a == outer[0] || a == outer[1]) ++a;
         const int b = 6 - outer[0] - outer[1] - a;
-        ok = !boundary_edges.count({std::min(c, d), std::max(c, d)}) && peel_allowed(v[a], c, d, v) &&
-             peel_allowed(v[b], c, d, v);
+        // Both ways: the old ridge a-b lies as far from the new edge c-d as their segments are
+        // apart, and the faces laid bare within the bound of the original boundary.
+        const Eigen::Vector3d pa = m.V.row(v[a]), pb = m.V.row(v[b]), pc = m.V.row(c), pd = m.V.row(d);
+        const Eigen::Vector2d st = closest_between_segments(pa, pb, pc, pd);
+        ok = !boundary_edges.count({std::min(c, d), std::max(c, d)}) &&
+             (pa + st[0] * (pb - pa) - pc - st[1] * (pd - pc)).norm() <= max_boundary_move &&
+             peel_allowed(v[a], c, d, v) && peel_allowed(v[b], c, d, v);
       } else if (outer.size() == 3) {
         // A cap: its apex (the node opposite the inner face) must belong to no other tetrahedron.
         int inner = 0;
         while (std::count(outer.begin(), outer.end(), inner)) ++inner;
-        ok = uses[v[inner]] == 1 && peel_allowed(v[kFaces[inner][0]], v[kFaces[inner][1]], v[kFaces[inner][2]], v);
+        // Both ways: the apex as far from the inner face as it lies, the inner face near the
+        // original boundary.
+        const Eigen::Vector3d apex = m.V.row(v[inner]), p0 = m.V.row(v[kFaces[inner][0]]),
+                              p1 = m.V.row(v[kFaces[inner][1]]), p2 = m.V.row(v[kFaces[inner][2]]);
+        const Eigen::Vector3d w = closest_on_triangle(apex, p0, p1, p2);
+        ok = uses[v[inner]] == 1 && (w[0] * p0 + w[1] * p1 + w[2] * p2 - apex).norm() <= max_boundary_move &&
+             peel_allowed(v[kFaces[inner][0]], v[kFaces[inner][1]], v[kFaces[inner][2]], v);
       }
       if (!ok) continue;
       keep[t] = 0;

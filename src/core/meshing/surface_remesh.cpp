@@ -1,6 +1,5 @@
 #include "liver_sim/meshing/surface_remesh.h"
 
-#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
@@ -9,29 +8,18 @@
 #include <queue>
 #include <string>
 
+#include "editable_surface.h"
 #include "liver_sim/geometry/surface_locator.h"
 
 namespace liver_sim {
 namespace {
 
-using Tri = std::array<int, 3>;
+using meshing_detail::area_normal;
+using meshing_detail::min_angle;
+using meshing_detail::Tri;
 
 // Triangles thinner than this (radians, about 6 degrees) are not made by a collapse or a move.
 constexpr double kThin = 0.1;
-
-Eigen::Vector3d area_normal(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-  return (b - a).cross(c - a);  // twice the area, along the outward normal
-}
-
-double min_angle(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-  const std::array<Eigen::Vector3d, 3> p{a, b, c};
-  double smallest = M_PI;
-  for (int k = 0; k < 3; ++k) {
-    const Eigen::Vector3d u = p[(k + 1) % 3] - p[k], v = p[(k + 2) % 3] - p[k];
-    smallest = std::min(smallest, std::atan2(u.cross(v).norm(), u.dot(v)));
-  }
-  return smallest;
-}
 
 // Whether triangle (a, b, c) may replace one with area normal `before` and smallest angle
 // `angle_before`: it does not turn over (normals within 60 degrees), and it is not thinner than
@@ -43,27 +31,19 @@ bool acceptable(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen:
   return n.dot(before) > 0.5 * n.norm() * before.norm() && (angle >= kThin || angle >= angle_before);
 }
 
-// The surface being remeshed: triangles (dead ones flagged) and, per vertex, the triangles
-// around it. Every vertex lies on the reference; `size` is the target there.
-class Remesher {
+// The surface being remeshed, starting from the reference itself. Every vertex lies on the
+// reference; `size` is the target there.
+class Remesher : public meshing_detail::EditableSurface {
  public:
   Remesher(const SurfaceMesh& reference, const std::vector<double>& size, double deviation, double min_length,
            size_t max_vertices, const std::string& origin)
-      : ref_(reference), ref_size_(size), deviation_(deviation), min_length_(min_length), max_vertices_(max_vertices),
-        origin_(origin) {
+      : EditableSurface(reference), ref_(reference), ref_size_(size), deviation_(deviation), min_length_(min_length),
+        max_vertices_(max_vertices), origin_(origin), size_(size.begin(), size.end()), hint_(reference.V.rows(), -1) {
     Eigen::VectorXd x(3 * reference.V.rows());
     for (Eigen::Index i = 0; i < reference.V.rows(); ++i) x.segment<3>(3 * i) = reference.V.row(i).transpose();
     locator_.build(x, reference.F);
-    for (Eigen::Index i = 0; i < reference.V.rows(); ++i) {
-      p_.push_back(reference.V.row(i).transpose());
-      size_.push_back(size[i]);
-      hint_.push_back(-1);
-      star_.emplace_back();
-    }
-    for (Eigen::Index t = 0; t < reference.F.rows(); ++t) {
-      add_triangle({reference.F(t, 0), reference.F(t, 1), reference.F(t, 2)});
+    for (Eigen::Index t = 0; t < reference.F.rows(); ++t)
       for (int k = 0; k < 3; ++k) hint_[reference.F(t, k)] = static_cast<int>(t);
-    }
   }
 
   void run(int iterations) {
@@ -76,109 +56,17 @@ class Remesher {
     flip_toward_valence_six();
   }
 
-  // Coarsened while every new triangle stays within `tolerance` of the reference (sampled on a
-  // grid of sub-triangles the tolerance across, facing the same way as the reference there), no
-  // edge grows longer than the remeshing's longest or 12 tolerances, and no triangle gets a
-  // smallest angle under `smallest_angle` (rad) that it did not have. Quadric error metrics
-  // (Garland & Heckbert 1997) order the edge collapses and place the merged vertex, which is then
-  // moved along the normal of its new triangles until they enclose the volume the old ones did
-  // (Lindstrom & Turk 1998): off the reference, chords on both sides of a curved part rather than
-  // all inside. A pass collapses each vertex's edges at most once, so that the triangles grow
-  // evenly; passes repeat until one removes under 1% of the triangles.
-  void coarsen(double tolerance, double smallest_angle) {
-    start_coarsening();
-    // No edge past the remeshing's longest (the boundary's triangles no larger than the elements
-    // inside) nor past 12 tolerances (sampled no sparser than the tolerance).
-    longest_edge_ = std::min(4.0 / 3.0 * *std::max_element(ref_size_.begin(), ref_size_.end()), 12 * tolerance);
-    std::vector<char> touched(p_.size());
-    for (int pass = 0; pass < 30; ++pass) {
-      struct Candidate {
-        double key;
-        int a, b;
-      };
-      std::vector<Candidate> candidates;
-      int alive = 0;
-      for (size_t t = 0; t < tri_.size(); ++t) {
-        if (!alive_[t]) continue;
-        ++alive;
-        for (int k = 0; k < 3; ++k) {
-          const int a = tri_[t][k], b = tri_[t][(k + 1) % 3];
-          // On flat parts every collapse costs nothing: the shorter edges go first.
-          if (a < b) candidates.push_back({best_position(a, b).second + 1e-4 * (p_[a] - p_[b]).squaredNorm() *
-                                                                              (p_[a] - p_[b]).squaredNorm(),
-                                           a, b});
-        }
-      }
-      std::sort(candidates.begin(), candidates.end(), [](const Candidate& x, const Candidate& y) { return x.key < y.key; });
-      std::fill(touched.begin(), touched.end(), 0);
-      int collapsed = 0;
-      for (const Candidate& c : candidates) {
-        if (touched[c.a] || touched[c.b] || star_[c.a].empty() || star_[c.b].empty()) continue;
-        if (!try_collapse(c.a, c.b, tolerance, smallest_angle)) continue;
-        ++collapsed;
-        const int kept = star_[c.a].empty() ? c.b : c.a;
-        touched[kept] = 1;
-        for (const int v : neighbours(kept)) touched[v] = 1;
-      }
-      if (collapsed < 0.005 * alive) break;
-    }
-  }
-
   SurfaceMesh result(RemeshReport* report) const {
-    std::vector<int> index(p_.size(), -1);
-    int n = 0, m = 0;
-    for (size_t t = 0; t < tri_.size(); ++t)
-      if (alive_[t]) {
-        ++m;
-        for (const int v : tri_[t])
-          if (index[v] < 0) index[v] = n++;
-      }
-    SurfaceMesh s;
-    s.V.resize(n, 3);
-    for (size_t v = 0; v < p_.size(); ++v)
-      if (index[v] >= 0) s.V.row(index[v]) = p_[v].transpose();
-    s.F.resize(m, 3);
-    double smallest = M_PI;
-    for (size_t t = 0, row = 0; t < tri_.size(); ++t)
-      if (alive_[t]) {
-        const Tri& f = tri_[t];
-        s.F.row(row++) << index[f[0]], index[f[1]], index[f[2]];
-        smallest = std::min(smallest, min_angle(p_[f[0]], p_[f[1]], p_[f[2]]));
-      }
+    double smallest = 0;
+    SurfaceMesh s = mesh(&smallest);
     if (report) {
-      report->triangles = m;
+      report->triangles = static_cast<int>(s.F.rows());
       report->min_angle_deg = smallest * 180 / M_PI;
     }
     return s;
   }
 
  private:
-  void add_triangle(const Tri& f) {
-    tri_.push_back(f);
-    alive_.push_back(1);
-    for (const int v : f) star_[v].push_back(static_cast<int>(tri_.size()) - 1);
-  }
-  static void drop(std::vector<int>& list, int value) { list.erase(std::find(list.begin(), list.end(), value)); }
-  static int corner(const Tri& f, int v) { return f[0] == v ? 0 : f[1] == v ? 1 : f[2] == v ? 2 : -1; }
-
-  // The other triangle across edge (a, b) of triangle t, and its vertex opposite the edge.
-  int across(int t, int a, int b) const {
-    for (const int u : star_[a])
-      if (u != t && corner(tri_[u], b) >= 0) return u;
-    return -1;
-  }
-  int opposite(int t, int a, int b) const {
-    for (const int v : tri_[t])
-      if (v != a && v != b) return v;
-    return -1;
-  }
-  std::vector<int> neighbours(int v) const {
-    std::vector<int> n;
-    for (const int t : star_[v])
-      for (const int u : tri_[t])
-        if (u != v && std::find(n.begin(), n.end(), u) == n.end()) n.push_back(u);
-    return n;
-  }
   double target(int a, int b) const { return 0.5 * (size_[a] + size_[b]); }
   // How far the middle of segment a-b lies from the reference (the chord's bulge).
   double bulge(const Eigen::Vector3d& a, const Eigen::Vector3d& b, int hint) const {
@@ -311,31 +199,6 @@ class Remesher {
     return true;
   }
 
-  // Whether edge a-b may be collapsed: neither c nor d is left with two triangles, and a and b
-  // share exactly the neighbours c and d (the link condition: the surface stays manifold).
-  bool collapsible(int t, int u, int a, int b) const {
-    const int c = opposite(t, a, b), d = opposite(u, a, b);
-    if (star_[c].size() <= 3 || star_[d].size() <= 3) return false;
-    const std::vector<int> na = neighbours(a), nb = neighbours(b);
-    for (const int v : na)
-      if (v != c && v != d && v != b && std::find(nb.begin(), nb.end(), v) != nb.end()) return false;
-    return true;
-  }
-
-  // Edge a-b of triangles t and u collapsed into b (wherever b now lies): t and u die, a's other
-  // triangles pass to b.
-  void merge(int t, int u, int a, int b) {
-    const int c = opposite(t, a, b), d = opposite(u, a, b);
-    alive_[t] = alive_[u] = 0;
-    drop(star_[c], t), drop(star_[b], t), drop(star_[d], u), drop(star_[b], u);
-    for (const int s : star_[a]) {
-      if (s == t || s == u) continue;
-      tri_[s][corner(tri_[s], a)] = b;
-      star_[b].push_back(s);
-    }
-    star_[a].clear();
-  }
-
   void flip_toward_valence_six() {
     for (size_t t = 0; t < tri_.size(); ++t)
       for (int k = 0; alive_[t] && k < 3; ++k) {
@@ -412,121 +275,14 @@ class Remesher {
     }
   }
 
-  // Each vertex's quadric: the squared distances to the planes of the triangles around it,
-  // area-weighted.
-  void start_coarsening() {
-    quadric_.assign(p_.size(), Eigen::Matrix4d::Zero());
-    for (size_t t = 0; t < tri_.size(); ++t) {
-      if (!alive_[t]) continue;
-      const Eigen::Vector3d n = area_normal(p_[tri_[t][0]], p_[tri_[t][1]], p_[tri_[t][2]]);
-      const double area = 0.5 * n.norm();
-      if (!(area > 0)) continue;
-      const Eigen::Vector3d unit = n / n.norm();
-      const double offset = -unit.dot(p_[tri_[t][0]]);
-      Eigen::Matrix4d k;
-      k.topLeftCorner<3, 3>() = unit * unit.transpose();
-      k.topRightCorner<3, 1>() = offset * unit;
-      k.bottomLeftCorner<1, 3>() = offset * unit.transpose();
-      k(3, 3) = offset * offset;
-      for (const int v : tri_[t]) quadric_[v] += area * k;
-    }
-  }
-
-  // Where the merged vertex of edge a-b fits the two quadrics best, and that error: the
-  // minimiser of the summed quadric from the edge's middle, along the directions the quadric
-  // constrains (on a flat part only across it: the vertex stays on the plane).
-  std::pair<Eigen::Vector3d, double> best_position(int a, int b) const {
-    const Eigen::Matrix4d q = quadric_[a] + quadric_[b];
-    const Eigen::Vector3d middle = 0.5 * (p_[a] + p_[b]);
-    const Eigen::Matrix3d A = q.topLeftCorner<3, 3>();
-    const Eigen::Vector3d linear = q.topRightCorner<3, 1>();
-    const Eigen::Vector3d gradient = A * middle + linear;
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(A);
-    Eigen::Vector3d x = middle;
-    const double largest = eigen.eigenvalues().maxCoeff();
-    for (int i = 0; i < 3; ++i)
-      if (eigen.eigenvalues()[i] > 1e-3 * largest)
-        x -= eigen.eigenvectors().col(i) * (eigen.eigenvectors().col(i).dot(gradient) / eigen.eigenvalues()[i]);
-    if ((x - middle).norm() > (p_[a] - p_[b]).norm()) x = middle;
-    return {x, std::max(0.0, x.dot(A * x) + 2 * linear.dot(x) + q(3, 3))};
-  }
-
-  // Edge a-b collapsed into b at the position its quadrics ask for, when the checks pass.
-  bool try_collapse(int a, int b, double tolerance, double smallest_angle) {
-    int t = -1;
-    for (const int s : star_[a])
-      if (corner(tri_[s], b) >= 0) t = s;
-    if (t < 0) return false;
-    const int u = across(t, a, b);
-    if (u < 0 || !collapsible(t, u, a, b)) return false;
-    std::vector<int> around;  // the triangles the merged vertex will have
-    for (const int v : {a, b})
-      for (const int s : star_[v])
-        if (s != t && s != u && std::find(around.begin(), around.end(), s) == around.end()) around.push_back(s);
-    // The enclosed volume kept (Lindstrom & Turk 1998): the new triangles' share of it is linear
-    // in the merged vertex, g . x; the quadrics' choice is moved along g onto that plane.
-    double volume_before = 0;
-    Eigen::Vector3d g = Eigen::Vector3d::Zero();
-    for (const int s : star_[a]) volume_before += p_[tri_[s][0]].dot(p_[tri_[s][1]].cross(p_[tri_[s][2]])) / 6;
-    for (const int s : star_[b])
-      if (s != t && s != u) volume_before += p_[tri_[s][0]].dot(p_[tri_[s][1]].cross(p_[tri_[s][2]])) / 6;
-    for (const int s : around) {
-      const Tri& f = tri_[s];
-      const int k = corner(f, a) >= 0 ? corner(f, a) : corner(f, b);
-      g += p_[f[(k + 1) % 3]].cross(p_[f[(k + 2) % 3]]) / 6;
-    }
-    Eigen::Vector3d x = best_position(a, b).first;
-    if (g.squaredNorm() > 0) x += (volume_before - g.dot(x)) / g.squaredNorm() * g;
-    std::vector<std::array<Eigen::Vector3d, 3>> moved(around.size());
-    for (size_t i = 0; i < around.size(); ++i) {
-      const Tri& f = tri_[around[i]];
-      for (int k = 0; k < 3; ++k) moved[i][k] = f[k] == a || f[k] == b ? x : p_[f[k]];
-      for (int k = 0; k < 3; ++k)
-        if ((moved[i][k] - moved[i][(k + 1) % 3]).norm() > longest_edge_) return false;
-      const Eigen::Vector3d before = area_normal(p_[f[0]], p_[f[1]], p_[f[2]]);
-      const Eigen::Vector3d after = area_normal(moved[i][0], moved[i][1], moved[i][2]);
-      const double angle = min_angle(moved[i][0], moved[i][1], moved[i][2]);
-      if (after.dot(before) < std::cos(30 * M_PI / 180) * after.norm() * before.norm() ||
-          (angle < smallest_angle && angle < min_angle(p_[f[0]], p_[f[1]], p_[f[2]])))
-        return false;
-      if (!near_reference(moved[i], after.normalized(), tolerance)) return false;
-    }
-    p_[b] = x;
-    quadric_[b] += quadric_[a];
-    merge(t, u, a, b);
-    return true;
-  }
-
-  // Whether triangle `q` lies within `tolerance` of the reference, facing the same way (a
-  // triangle reaching across a thin part to the other sheet does not), sampled on a grid of
-  // sub-triangles `tolerance` across (12 along an edge at most: coarsening makes none longer).
-  bool near_reference(const std::array<Eigen::Vector3d, 3>& q, const Eigen::Vector3d& normal, double tolerance) const {
-    const double longest = std::max({(q[1] - q[0]).norm(), (q[2] - q[1]).norm(), (q[0] - q[2]).norm()});
-    const int k = std::clamp(static_cast<int>(std::ceil(longest / tolerance)), 1, 12);
-    for (int i = 0; i <= k; ++i)
-      for (int j = 0; i + j <= k; ++j) {
-        const Eigen::Vector3d point = q[0] + (q[1] - q[0]) * i / k + (q[2] - q[0]) * j / k;
-        const SurfaceLocator::Hit hit = locator_.closest(point, tolerance, -1);
-        if (hit.triangle < 0 || hit.distance > tolerance || hit.normal.dot(normal) <= 0) return false;
-      }
-    const SurfaceLocator::Hit middle = locator_.closest((q[0] + q[1] + q[2]) / 3, tolerance, -1);
-    return middle.triangle >= 0 && middle.distance <= tolerance && middle.normal.dot(normal) > 0;
-  }
-
   const SurfaceMesh& ref_;
   const std::vector<double>& ref_size_;
   const double deviation_, min_length_;
   const size_t max_vertices_;
   const std::string origin_;
   SurfaceLocator locator_;
-  std::vector<Eigen::Vector3d> p_;
   std::vector<double> size_;
   std::vector<int> hint_;  // the reference triangle the vertex was last projected onto
-  std::vector<Tri> tri_;
-  std::vector<char> alive_;
-  std::vector<std::vector<int>> star_;  // live triangles around each vertex
-  std::vector<Eigen::Matrix4d> quadric_;  // coarsening: each vertex's quadric
-  double longest_edge_ = 0;
 };
 
 }  // namespace
@@ -556,7 +312,6 @@ SurfaceMesh remesh_surface(const SurfaceMesh& reference, const std::vector<doubl
   }
   Remesher r(reference, size, options.deviation, options.min_size, cap, origin);
   r.run(options.iterations);
-  if (options.coarsen_within > 0) r.coarsen(options.coarsen_within, options.coarsen_min_angle * M_PI / 180);
   return r.result(report);
 }
 

@@ -9,6 +9,7 @@
 #include <optional>
 #include <vector>
 
+#include "liver_sim/meshing/surface_coarsen.h"
 #include "liver_sim/meshing/surface_remesh.h"
 #include "liver_sim/meshing/surface_repair.h"
 
@@ -232,13 +233,18 @@ TetMesh remesh_and_fill(const SurfaceMesh& surface, const std::string& origin, c
     RemeshOptions remesh;
     remesh.deviation = options.max_deviation;
     remesh.min_size = shortest;
-    remesh.coarsen_within = options.coarsen_within;
     std::vector<double> sizes = curvature_sizes(surface, options.max_deviation, shortest, h, options.gradation);
     SurfaceMesh boundary;
     // Where the remeshed sheets still cross (a gap the thickness bound underestimated), shorter
     // edges everywhere, twice at most; then the crossing is reported where it is.
     for (int retry = 0;; ++retry) {
       boundary = remesh_surface(surface, sizes, remesh, origin);
+      if (options.coarsen_within > 0) {
+        CoarsenOptions coarsen;
+        coarsen.tolerance = options.coarsen_within;
+        coarsen.max_edge = 4.0 / 3.0 * *std::max_element(sizes.begin(), sizes.end());  // the remeshing's longest
+        boundary = coarsen_surface(boundary, surface, coarsen, origin);
+      }
       try {
         repair_surface(boundary, origin + " (remeshed)");  // closed, manifold, not crossing itself
         break;
