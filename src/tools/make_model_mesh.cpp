@@ -40,7 +40,7 @@ std::string fixed(double x, int digits) {
 // The mesh's own targets (smallest dihedral angle, element count), each missed one with its
 // value, the bound and why; empty when both are met.
 std::string missed_mesh_targets(const Options& o, const TetQuality& q, const TetMesh& mesh, const VolumeMeshReport& report,
-                                bool sized, bool resurfaced) {
+                                bool sized, bool coarsened) {
   std::string missed;
   if (q.min_dihedral_deg < o.min_dihedral)
     missed = "smallest dihedral angle " + fixed(q.min_dihedral_deg, 2) + " deg, " +
@@ -55,7 +55,7 @@ std::string missed_mesh_targets(const Options& o, const TetQuality& q, const Tet
       << (off > 0 ? "over" : "under") << ", the bound is " << fixed(100 * kCountTolerance, 0) << "%";
     // A re-surfaced boundary is coarsened as far as --coarsen-within allows; gmsh's patches, and
     // a boundary left as remeshed, are refined to --max-deviation.
-    const std::string bound = resurfaced && coarsening_bound(o) > 0 ? "--coarsen-within" : "--max-deviation";
+    const std::string bound = coarsened ? "--coarsen-within" : "--max-deviation";
     if (off > 0)
       m << " (the boundary needs " << boundary << " triangles to stay within " << bound << " of the surface, and the "
         << "volume inside them, its edges up to " << fixed(report.element_size / o.unit, 1) << " " << o.unit_name
@@ -183,9 +183,10 @@ ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::
     }
     r.times.emplace_back("mesh", clock.lap());
     r.quality = tet_quality(r.mesh);
+    // The boundary was coarsened: a re-surfaced surface is remeshed, then coarsened.
+    const bool coarsened = r.resurfaced && coarsening_bound(o) > 0;
     if (r.quality.min_dihedral_deg < o.min_dihedral) {
       // A coarsened boundary has used that much of the Hausdorff bound: the repair gets the rest.
-      const bool coarsened = r.resurfaced && coarsening_bound(o) > 0;
       r.slivers = repair_slivers(r.mesh, o.min_dihedral,
                                  coarsened ? hausdorff_bound(o) - coarsening_bound(o) : std::numeric_limits<double>::infinity());
       say("slivers: smallest dihedral angle " + std::to_string(r.slivers.before_deg) + " deg; " +
@@ -194,7 +195,7 @@ ModelMesh make_model_mesh(const Options& o, const std::function<void(const std::
       r.quality = tet_quality(r.mesh);
       r.times.emplace_back("slivers", clock.lap());
     }
-    r.missed = missed_mesh_targets(o, r.quality, r.mesh, r.mesh_report, o.size > 0, r.resurfaced);
+    r.missed = missed_mesh_targets(o, r.quality, r.mesh, r.mesh_report, o.size > 0, coarsened);
     if (r.missed.empty() || !may_resurface || r.resurfaced) break;
     resurface_input(r.input_name + ": " + r.missed);
   }

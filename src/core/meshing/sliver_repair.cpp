@@ -24,6 +24,14 @@ Face sorted_face(int a, int b, int c) {
 
 const int kFaces[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};  // face k: opposite node k
 
+// How many tetrahedra share each face: 1 on the boundary.
+std::map<Face, int> face_counts(const TetMesh& m) {
+  std::map<Face, int> count;
+  for (int t = 0; t < m.T.rows(); ++t)
+    for (const auto& f : kFaces) ++count[sorted_face(m.T(t, f[0]), m.T(t, f[1]), m.T(t, f[2]))];
+  return count;
+}
+
 double tet_min_dihedral(const TetMesh& m, int t) {
   return min_dihedral_deg(m.V.row(m.T(t, 0)), m.V.row(m.T(t, 1)), m.V.row(m.T(t, 2)), m.V.row(m.T(t, 3)));
 }
@@ -58,18 +66,16 @@ SliverRepairReport repair_slivers(TetMesh& m, double target, double max_boundary
   r.before_deg = smallest();
   // The boundary as the mesher made it, per node its triangles: a boundary node may move along
   // it (its moves add up over visits and rounds) but not farther than max_boundary_move off it.
+  // Unbounded (gmsh's own boundary), none of it is measured.
+  const bool bounded = std::isfinite(max_boundary_move);
   std::vector<std::vector<Eigen::Matrix3d>> original_faces(m.V.rows());
-  {
-    std::map<Face, int> count;
-    for (int t = 0; t < m.T.rows(); ++t)
-      for (const auto& f : kFaces) ++count[sorted_face(m.T(t, f[0]), m.T(t, f[1]), m.T(t, f[2]))];
-    for (const auto& [f, n] : count) {
+  if (bounded)
+    for (const auto& [f, n] : face_counts(m)) {
       if (n != 1) continue;
       Eigen::Matrix3d corners;
       for (int k = 0; k < 3; ++k) corners.col(k) = m.V.row(f[k]).transpose();
       for (const int v : f) original_faces[v].push_back(corners);
     }
-  }
   // How far point p lies from the original boundary's triangles at `nodes`.
   auto off_original = [&](const Eigen::Vector3d& p, std::initializer_list<int> nodes) {
     double d = std::numeric_limits<double>::infinity();
@@ -84,6 +90,7 @@ SliverRepairReport repair_slivers(TetMesh& m, double target, double max_boundary
   // the sliver's nodes (sampled on a grid of 4 x 4 sub-triangles): a later round's peel under an
   // earlier one adds up.
   auto peel_allowed = [&](int a, int b, int c, const Eigen::Vector4i& v) {
+    if (!bounded) return true;
     const Eigen::Vector3d pa = m.V.row(a), pb = m.V.row(b), pc = m.V.row(c);
     for (int i = 0; i <= 4; ++i)
       for (int j = 0; i + j <= 4; ++j)
@@ -93,9 +100,7 @@ SliverRepairReport repair_slivers(TetMesh& m, double target, double max_boundary
   };
   for (int round = 0; round < 8 && smallest() < target; ++round) {
     // The boundary: faces of one tetrahedron, their edges and nodes.
-    std::map<Face, int> face_count;
-    for (int t = 0; t < m.T.rows(); ++t)
-      for (const auto& f : kFaces) ++face_count[sorted_face(m.T(t, f[0]), m.T(t, f[1]), m.T(t, f[2]))];
+    std::map<Face, int> face_count = face_counts(m);
     std::set<std::pair<int, int>> boundary_edges;
     std::vector<char> on_boundary(m.V.rows(), 0);
     std::vector<int> uses(m.V.rows(), 0);
@@ -201,7 +206,8 @@ SliverRepairReport repair_slivers(TetMesh& m, double target, double max_boundary
               const Eigen::RowVector3d old = m.V.row(node);
               m.V.row(node) += sign * step * directions.row(axis);
               // Stays near where the mesher put it; on the boundary, within the move allowed.
-              if ((m.V.row(node) - start).norm() > 0.25 * edge || (on_boundary[node] && off_original(m.V.row(node).transpose(), {node}) > max_boundary_move)) {
+              if ((m.V.row(node) - start).norm() > 0.25 * edge ||
+                  (bounded && on_boundary[node] && off_original(m.V.row(node).transpose(), {node}) > max_boundary_move)) {
                 m.V.row(node) = old;
                 continue;
               }

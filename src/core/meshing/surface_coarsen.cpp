@@ -59,10 +59,9 @@ class Coarsener : public meshing_detail::EditableSurface {
       for (const Candidate& c : candidates) {
         if (touched[c.a] || touched[c.b] || star_[c.a].empty() || star_[c.b].empty()) continue;
         if (!try_collapse(c.a, c.b)) continue;
-        ++collapsed;
-        const int kept = star_[c.a].empty() ? c.b : c.a;
-        touched[kept] = 1;
-        for (const int v : neighbours(kept)) touched[v] = 1;
+        ++collapsed;  // into c.b
+        touched[c.b] = 1;
+        for (const int v : neighbours(c.b)) touched[v] = 1;
       }
       if (collapsed < 0.005 * alive) break;
     }
