@@ -237,10 +237,10 @@ int run(const Options& o) {
 int main(int argc, char** argv) {
   Options options;
   if (const std::optional<int> status = parse_args(argc, argv, &options)) return *status;
-  // A watchdog: gmsh has been seen to recurse without end on rare surfaces; the run then ends
-  // with a message instead of hanging its caller.
+  // A watchdog over the whole run (each gmsh session has its own budget, volume_mesher.h): past
+  // it the run ends with a message instead of hanging its caller.
   std::signal(SIGALRM, [](int) {
-    static const char text[] = "make_model: the time limit (--time-limit) ran out; the mesher did not finish\n";
+    static const char text[] = "make_model: the time limit (--time-limit) ran out before the model was made\n";
     [[maybe_unused]] const ssize_t n = write(STDERR_FILENO, text, sizeof(text) - 1);
     _exit(1);
   });

@@ -2,7 +2,10 @@
 // re-meshed at the target size (gmsh classifies it into patches that it can parametrise, then
 // meshes them: a 500k-triangle segmentation becomes a few thousand boundary triangles on the same
 // shape), then the volume is filled (Delaunay, optimised). Deterministic: one thread, fixed
-// options and random seed, so the same surface gives the same mesh bit for bit.
+// options and random seed, so the same surface gives the same mesh bit for bit on one machine.
+// Each gmsh session runs in a child process (runtime/child_process.h) with a time budget of 30 s
+// plus 1 ms per tetrahedron expected: gmsh can loop without end on rare surfaces, and which ones
+// depends on the machine's floating point. A session past its budget, or crashed, has failed.
 // Built into liver_sim_mesher, not the core: the node and the simulator do not link gmsh.
 #pragma once
 

@@ -5,13 +5,17 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <numeric>
 #include <optional>
+#include <sstream>
+#include <type_traits>
 #include <vector>
 
 #include "liver_sim/meshing/surface_coarsen.h"
 #include "liver_sim/meshing/surface_remesh.h"
 #include "liver_sim/meshing/surface_repair.h"
+#include "liver_sim/runtime/child_process.h"
 
 namespace liver_sim {
 namespace {
@@ -157,6 +161,101 @@ int add_discrete_surface(const SurfaceMesh& surface) {
   return patch;
 }
 
+// What a gmsh session sends back from its child process: how it ended, its message, the report
+// and the mesh, as bytes.
+enum class SessionEnd : char { kMesh, kSizingFailure, kMeshError, kRoughSurface };
+
+template <class T>
+void put(std::string& bytes, const T& x) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  bytes.append(reinterpret_cast<const char*>(&x), sizeof x);
+}
+
+template <class T>
+T take(const std::string& bytes, size_t& at) {
+  T x;
+  std::memcpy(&x, bytes.data() + at, sizeof x);
+  at += sizeof x;
+  return x;
+}
+
+std::string pack(SessionEnd end, const std::string& message, const VolumeMeshReport& r, const TetMesh& m) {
+  std::string bytes;
+  put(bytes, end);
+  put(bytes, message.size());
+  bytes += message;
+  put(bytes, r);
+  put(bytes, m.V.rows());
+  put(bytes, m.T.rows());
+  bytes.append(reinterpret_cast<const char*>(m.V.data()), sizeof(double) * m.V.size());
+  bytes.append(reinterpret_cast<const char*>(m.T.data()), sizeof(int) * m.T.size());
+  return bytes;
+}
+
+// gmsh has been seen to loop without end on rare surfaces, and on another machine's floating
+// point on a surface it meshes here in a second: each session runs in a child process
+// (child_process.h) and is stopped past `budget` seconds. What the session threw is thrown here;
+// a session stopped or crashed throws SizingFailure when it sized by curvature (the uniform size
+// is tried next), MeshError otherwise.
+TetMesh in_child_process(const std::function<TetMesh(VolumeMeshReport&, const ChildProgress&)>& session, double budget,
+                         bool curvature_sizing, const std::string& origin, VolumeMeshReport& r,
+                         const ChildProgress& progress) {
+  const ChildOutcome outcome = run_in_child(
+      [&](const ChildProgress& child_progress) {
+        VolumeMeshReport report = r;
+        try {
+          const TetMesh m = session(report, child_progress);
+          return pack(SessionEnd::kMesh, "", report, m);
+        } catch (const SizingFailure& failure) {
+          return pack(SessionEnd::kSizingFailure, failure.message, report, TetMesh());
+        } catch (const RoughSurfaceError& e) {
+          return pack(SessionEnd::kRoughSurface, e.what(), report, TetMesh());
+        } catch (const MeshError& e) {
+          return pack(SessionEnd::kMeshError, e.what(), report, TetMesh());
+        } catch (const std::string& message) {  // gmsh's exceptions outside its parallel regions
+          return pack(SessionEnd::kMeshError, origin + ": gmsh: " + message, report, TetMesh());
+        }
+      },
+      budget, progress);
+  if (outcome.status != ChildOutcome::Status::kFinished) {
+    ++r.passes;
+    std::ostringstream why;
+    if (outcome.status == ChildOutcome::Status::kTimedOut)
+      why << "gmsh did not finish in " << budget << " s and was stopped";
+    else
+      why << "gmsh's process ended (" << outcome.reason << ")";
+    if (curvature_sizing) throw SizingFailure{why.str()};
+    throw MeshError(origin + ": " + why.str());
+  }
+  const std::string& bytes = outcome.result;
+  size_t at = 0;
+  const auto end = take<SessionEnd>(bytes, at);
+  const auto length = take<size_t>(bytes, at);
+  const std::string message = bytes.substr(at, length);
+  at += length;
+  r = take<VolumeMeshReport>(bytes, at);
+  TetMesh m;
+  m.V.resize(take<Eigen::Index>(bytes, at), 3);
+  m.T.resize(take<Eigen::Index>(bytes, at), 4);
+  std::memcpy(m.V.data(), bytes.data() + at, sizeof(double) * m.V.size());
+  std::memcpy(m.T.data(), bytes.data() + at + sizeof(double) * m.V.size(), sizeof(int) * m.T.size());
+  switch (end) {
+    case SessionEnd::kSizingFailure:
+      throw SizingFailure{message};
+    case SessionEnd::kRoughSurface:
+      throw RoughSurfaceError(message);
+    case SessionEnd::kMeshError:
+      throw MeshError(message);
+    case SessionEnd::kMesh:
+      break;
+  }
+  return m;
+}
+
+// A session's time budget for about `tetrahedra`: far above what meshing takes (gmsh made
+// 200,000 tetrahedra of the phantom in 5 s, its passes included), far below the hour a loop runs.
+double session_budget(double tetrahedra) { return 30 + 1e-3 * tetrahedra; }
+
 // One gmsh session from the input triangles to the tetrahedra.
 TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,
                         double h, bool curvature_sizing, VolumeMeshReport& r,
@@ -286,40 +385,47 @@ TetMesh mesh_volume(const SurfaceMesh& surface, const std::string& origin, const
     if (report) *report = r;
     return m;
   }
+  const double budget = session_budget(kTetsPerCubicSize * enclosed_volume(surface) / std::pow(h, 3));
+  auto session = [&](bool curvature_sizing) {
+    return in_child_process(
+        [&](VolumeMeshReport& session_report, const ChildProgress& session_progress) {
+          return mesh_in_session(surface, origin, options, h, curvature_sizing, session_report, session_progress);
+        },
+        budget, curvature_sizing, origin, r, progress);
+  };
+  TetMesh m;
   try {
-    TetMesh m;
-    try {
-      m = mesh_in_session(surface, origin, options, h, true, r, progress);
-    } catch (const SizingFailure& failure) {
-      // Fine elements next to coarse ones can defeat gmsh's recovery of patch edges; a uniform
-      // size is the safe fall-back (the Hausdorff distance says what it costs).
-      progress("gmsh failed with curvature sizing (" + failure.message + "): meshing at a uniform size");
-      r.curvature_sizing = false;
-      m = mesh_in_session(surface, origin, options, h, false, r, progress);
-    }
-    if (report) *report = r;
-    return m;
-  } catch (const std::string& message) {  // gmsh's exceptions outside its parallel regions
-    throw MeshError(origin + ": gmsh: " + message);
+    m = session(true);
+  } catch (const SizingFailure& failure) {
+    // Fine elements next to coarse ones can defeat gmsh's recovery of patch edges; a uniform
+    // size is the safe fall-back (the Hausdorff distance says what it costs).
+    progress("gmsh failed with curvature sizing (" + failure.message + "): meshing at a uniform size");
+    r.curvature_sizing = false;
+    m = session(false);
   }
+  if (report) *report = r;
+  return m;
 }
 
 TetMesh fill_volume(const SurfaceMesh& boundary, double max_size, const std::string& origin) {
   if (!(max_size > 0) || !std::isfinite(max_size)) throw MeshError(origin + ": no valid element size");
-  try {
-    GmshSession session;
-    gmsh::model::add("liver");
-    const int patch = add_discrete_surface(boundary);
-    // A discrete surface without a parametrisation keeps its triangles: only the volume is meshed.
-    gmsh::model::geo::addVolume({gmsh::model::geo::addSurfaceLoop({patch})});
-    gmsh::model::geo::synchronize();
-    gmsh::option::setNumber("Mesh.MeshSizeMax", max_size);
-    gmsh::model::mesh::generate(3);
-    if (const std::string error = gmsh_error(); !error.empty()) throw MeshError(origin + ": gmsh: " + error);
-    return extract(origin);
-  } catch (const std::string& message) {
-    throw MeshError(origin + ": gmsh: " + message);
-  }
+  // About as many tetrahedra as the size makes inside and a few per boundary triangle.
+  const double tetrahedra = kTetsPerCubicSize * enclosed_volume(boundary) / std::pow(max_size, 3) + 4.0 * boundary.F.rows();
+  VolumeMeshReport unused;
+  return in_child_process(
+      [&](VolumeMeshReport&, const ChildProgress&) {
+        GmshSession session;
+        gmsh::model::add("liver");
+        const int patch = add_discrete_surface(boundary);
+        // A discrete surface without a parametrisation keeps its triangles: only the volume is meshed.
+        gmsh::model::geo::addVolume({gmsh::model::geo::addSurfaceLoop({patch})});
+        gmsh::model::geo::synchronize();
+        gmsh::option::setNumber("Mesh.MeshSizeMax", max_size);
+        gmsh::model::mesh::generate(3);
+        if (const std::string error = gmsh_error(); !error.empty()) throw MeshError(origin + ": gmsh: " + error);
+        return extract(origin);
+      },
+      session_budget(tetrahedra), false, origin, unused, nullptr);
 }
 
 }  // namespace liver_sim
