@@ -46,9 +46,8 @@ std::optional<InsilicoCase> load_insilico_case(const std::string& folder, std::s
   std::vector<char> on_surface(c.initial.V.rows(), 0);
   for (int t = 0; t < F.rows(); ++t)
     for (int j = 0; j < 3; ++j) on_surface[F(t, j)] = 1;
-  const Eigen::VectorXd x = Eigen::Map<const Eigen::VectorXd>(Eigen::MatrixXd(c.initial.V.transpose()).data(), c.initial.V.size());
   SurfaceLocator surface;
-  surface.build(x, F);
+  surface.build(SurfaceMesh{c.initial.V, F});
   for (int i = 0; i < c.initial.V.rows(); ++i)
     if (!on_surface[i]) {
       c.targets.push_back(i);

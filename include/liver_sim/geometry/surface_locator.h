@@ -10,6 +10,8 @@
 #include <optional>
 #include <vector>
 
+#include "liver_sim/geometry/surface_mesh.h"
+
 namespace liver_sim {
 
 class SurfaceLocator {
@@ -25,6 +27,8 @@ class SurfaceLocator {
   // viewpoint, only those whose front faces it (a camera sees no back face).
   void build(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary,
              const std::optional<Eigen::Vector3d>& viewpoint = std::nullopt);
+  // A surface's own triangles at its vertices.
+  void build(const SurfaceMesh& surface);
   // The same triangles at new positions x: the boxes are refitted, the tree kept (it stays exact;
   // only its pruning weakens as the surface moves far from the shape it was built on).
   void refresh(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary);

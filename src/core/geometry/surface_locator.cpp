@@ -78,6 +78,11 @@ void SurfaceLocator::fit(int b) {
   }
 }
 
+void SurfaceLocator::build(const SurfaceMesh& surface) {
+  const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> node_major = surface.V;
+  build(Eigen::Map<const Eigen::VectorXd>(node_major.data(), node_major.size()), surface.F);
+}
+
 void SurfaceLocator::refresh(const Eigen::VectorXd& x, const Eigen::MatrixX3i& boundary) {
   for (size_t k = 0; k < triangles_.size(); ++k)
     for (int j = 0; j < 3; ++j) corners_[k].col(j) = node(x, boundary(triangles_[k], j));

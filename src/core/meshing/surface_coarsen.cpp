@@ -25,9 +25,7 @@ class Coarsener : public meshing_detail::EditableSurface {
       : EditableSurface(surface), tolerance_(o.tolerance), smallest_angle_(o.min_angle * M_PI / 180),
         // No edge past 12 tolerances either, so that the sampling is never sparser than the tolerance.
         longest_edge_(std::min(o.max_edge, 12 * o.tolerance)) {
-    Eigen::VectorXd x(3 * reference.V.rows());
-    for (Eigen::Index i = 0; i < reference.V.rows(); ++i) x.segment<3>(3 * i) = reference.V.row(i).transpose();
-    locator_.build(x, reference.F);
+    locator_.build(reference);
     start_quadrics();
   }
 
@@ -36,9 +34,12 @@ class Coarsener : public meshing_detail::EditableSurface {
   void run() {
     std::vector<char> touched(p_.size());
     for (int pass = 0; pass < 30; ++pass) {
+      // An edge, its merged vertex where the quadrics put it, and its order. Neither end of an
+      // edge tried changes within the pass (a collapse touches its neighbourhood).
       struct Candidate {
         double key;
         int a, b;
+        Eigen::Vector3d x;
       };
       std::vector<Candidate> candidates;
       int alive = 0;
@@ -48,9 +49,9 @@ class Coarsener : public meshing_detail::EditableSurface {
         for (int k = 0; k < 3; ++k) {
           const int a = tri_[t][k], b = tri_[t][(k + 1) % 3];
           // On flat parts every collapse costs nothing: the shorter edges go first.
-          if (a < b) candidates.push_back({best_position(a, b).second + 1e-4 * (p_[a] - p_[b]).squaredNorm() *
-                                                                              (p_[a] - p_[b]).squaredNorm(),
-                                           a, b});
+          if (a >= b) continue;
+          const auto [x, error] = best_position(a, b);
+          candidates.push_back({error + 1e-4 * (p_[a] - p_[b]).squaredNorm() * (p_[a] - p_[b]).squaredNorm(), a, b, x});
         }
       }
       std::sort(candidates.begin(), candidates.end(), [](const Candidate& x, const Candidate& y) { return x.key < y.key; });
@@ -58,7 +59,7 @@ class Coarsener : public meshing_detail::EditableSurface {
       int collapsed = 0;
       for (const Candidate& c : candidates) {
         if (touched[c.a] || touched[c.b] || star_[c.a].empty() || star_[c.b].empty()) continue;
-        if (!try_collapse(c.a, c.b)) continue;
+        if (!try_collapse(c.a, c.b, c.x)) continue;
         ++collapsed;  // into c.b
         touched[c.b] = 1;
         for (const int v : neighbours(c.b)) touched[v] = 1;
@@ -107,8 +108,9 @@ class Coarsener : public meshing_detail::EditableSurface {
     return {x, std::max(0.0, x.dot(A * x) + 2 * linear.dot(x) + q(3, 3))};
   }
 
-  // Edge a-b collapsed into b at the position its quadrics ask for, when the checks pass.
-  bool try_collapse(int a, int b) {
+  // Edge a-b collapsed into b at x (where its quadrics put it), moved to keep the volume, when
+  // the checks pass.
+  bool try_collapse(int a, int b, Eigen::Vector3d x) {
     int t = -1;
     for (const int s : star_[a])
       if (corner(tri_[s], b) >= 0) t = s;
@@ -131,7 +133,6 @@ class Coarsener : public meshing_detail::EditableSurface {
       const int k = corner(f, a) >= 0 ? corner(f, a) : corner(f, b);
       g += p_[f[(k + 1) % 3]].cross(p_[f[(k + 2) % 3]]) / 6;
     }
-    Eigen::Vector3d x = best_position(a, b).first;
     if (g.squaredNorm() > 0) x += (volume_before - g.dot(x)) / g.squaredNorm() * g;
     std::vector<std::array<Eigen::Vector3d, 3>> moved(around.size());
     for (size_t i = 0; i < around.size(); ++i) {

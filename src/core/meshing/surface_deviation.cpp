@@ -16,8 +16,7 @@ constexpr double kMaxDivisions = 1000;
 OneSidedDeviation one_sided(const SurfaceMesh& from, const SurfaceMesh& to, double spacing) {
   if (to.F.rows() == 0) throw std::invalid_argument("surface_deviation: a surface without triangles");
   SurfaceLocator locator;
-  const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> node_major = to.V;
-  locator.build(Eigen::Map<const Eigen::VectorXd>(node_major.data(), node_major.size()), to.F);
+  locator.build(to);
   OneSidedDeviation d;
   auto sample = [&](const Eigen::Vector3d& p) {
     const double r = locator.closest(p).distance;

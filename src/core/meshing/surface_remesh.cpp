@@ -39,9 +39,7 @@ class Remesher : public meshing_detail::EditableSurface {
            size_t max_vertices, const std::string& origin)
       : EditableSurface(reference), ref_(reference), ref_size_(size), deviation_(deviation), min_length_(min_length),
         max_vertices_(max_vertices), origin_(origin), size_(size.begin(), size.end()), hint_(reference.V.rows(), -1) {
-    Eigen::VectorXd x(3 * reference.V.rows());
-    for (Eigen::Index i = 0; i < reference.V.rows(); ++i) x.segment<3>(3 * i) = reference.V.row(i).transpose();
-    locator_.build(x, reference.F);
+    locator_.build(reference);
     for (Eigen::Index t = 0; t < reference.F.rows(); ++t)
       for (int k = 0; k < 3; ++k) hint_[reference.F(t, k)] = static_cast<int>(t);
   }
@@ -346,11 +344,7 @@ std::vector<double> curvature_sizes(const SurfaceMesh& s, double deviation, doub
   // largest ball touching the surface at the vertex from inside or outside (shrinking balls,
   // Ma et al. 2012), however flat the surface is there.
   SurfaceLocator locator;
-  {
-    Eigen::VectorXd x(3 * n);
-    for (Eigen::Index i = 0; i < n; ++i) x.segment<3>(3 * i) = s.V.row(i).transpose();
-    locator.build(x, s.F);
-  }
+  locator.build(s);
   for (Eigen::Index i = 0; i < n; ++i) {
     const Eigen::Vector3d p = s.V.row(i).transpose();
     for (const double side : {-1.0, 1.0}) {
