@@ -207,8 +207,10 @@ std::optional<int> parse_args(int argc, char** argv, Options* o) {
                  "unit and frame, to overlay on the segmentation")
       ->option_text("FILE");
   app.add_option("--time-limit", o->time_limit,
-                 "wall time the run may take, in [1, 86400] s (default 600): past it make_model\n"
-                 "stops with exit status 1 and says so (a mesher that does not finish)")
+                 "wall time the whole run may take, in [1, 86400] s (default 600): past it\n"
+                 "make_model stops with exit status 1 and says so (each gmsh session also has a\n"
+                 "budget of its own, 30 s + 1 ms per tetrahedron, at most 300 s, past which the\n"
+                 "next way to mesh is tried)")
       ->option_text("S")
       ->check(in("in [1, 86400]", 1, 86400));
   app.add_flag("--quiet", o->quiet, "no progress on standard error");

@@ -37,8 +37,9 @@ TEST(ChildProcess, TheResultAndTheProgressComeBackWhole) {
 }
 
 // Work that never ends is stopped at its deadline and leaves no process behind; work that
-// crashes or throws is reported as died, with how. Kills: the child not killed at the deadline
-// (tried: the test hangs), a child that died taken as finished (tried).
+// crashes or throws is reported as died, with how; a caller's callback that throws leaves no
+// child either. Kills: the child not killed at the deadline (tried: the test hangs), a child that
+// died taken as finished, the child left when the callback throws (tried each).
 TEST(ChildProcess, AHangIsStoppedAndACrashOrThrowIsSaid) {
   pid_t hung = 0;
   const ChildOutcome slow = run_in_child(
@@ -51,6 +52,22 @@ TEST(ChildProcess, AHangIsStoppedAndACrashOrThrowIsSaid) {
   ASSERT_GT(hung, 0);
   EXPECT_EQ(kill(hung, 0), -1);  // reaped: no such process
   EXPECT_EQ(errno, ESRCH);
+
+  // The caller's progress callback throws: the exception reaches the caller, the child is stopped.
+  pid_t left = 0;
+  EXPECT_THROW(run_in_child(
+                   [](const ChildProgress& progress) -> std::string {
+                     progress(std::to_string(getpid()));
+                     for (;;) pause();
+                   },
+                   3600,
+                   [&](const std::string& line) {
+                     left = std::stoi(line);
+                     throw std::runtime_error("the caller's own");
+                   }),
+               std::runtime_error);
+  ASSERT_GT(left, 0);
+  EXPECT_EQ(kill(left, 0), -1);
 
   const ChildOutcome crashed = run_in_child(
       [](const ChildProgress&) -> std::string {

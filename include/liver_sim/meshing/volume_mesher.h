@@ -4,8 +4,9 @@
 // shape), then the volume is filled (Delaunay, optimised). Deterministic: one thread, fixed
 // options and random seed, so the same surface gives the same mesh bit for bit on one machine.
 // Each gmsh session runs in a child process (runtime/child_process.h) with a time budget of 30 s
-// plus 1 ms per tetrahedron expected: gmsh can loop without end on rare surfaces, and which ones
-// depends on the machine's floating point. A session past its budget, or crashed, has failed.
+// plus 1 ms per tetrahedron expected, at most 300 s: gmsh can loop without end on rare surfaces,
+// and which ones depends on the heap's state (the environment). A session past its budget, or
+// crashed, has failed.
 // Built into liver_sim_mesher, not the core: the node and the simulator do not link gmsh.
 #pragma once
 
@@ -44,7 +45,8 @@ class RoughSurfaceError : public MeshError {
 
 struct VolumeMeshReport {
   double element_size = 0;  // m, the size the final pass used
-  int passes = 0;           // volume meshings (more when one missed the count or failed)
+  int passes = 0;           // volume meshings (more when one missed the count or failed; a
+                            // session stopped or crashed counts as one)
   bool curvature_sizing = true;  // false: gmsh failed with it and the mesh has a uniform size
 };
 

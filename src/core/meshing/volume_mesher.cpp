@@ -192,8 +192,8 @@ std::string pack(SessionEnd end, const std::string& message, const VolumeMeshRep
   return bytes;
 }
 
-// gmsh has been seen to loop without end on rare surfaces, and on another machine's floating
-// point on a surface it meshes here in a second: each session runs in a child process
+// gmsh has been seen to loop without end on rare surfaces, and, with the heap in another state
+// (another environment), on a surface it meshes here in a second: each session runs in a child process
 // (child_process.h) and is stopped past `budget` seconds. What the session threw is thrown here;
 // a session stopped or crashed throws SizingFailure when it sized by curvature (the uniform size
 // is tried next), MeshError otherwise.
@@ -237,8 +237,8 @@ TetMesh in_child_process(const std::function<TetMesh(VolumeMeshReport&, const Ch
   TetMesh m;
   m.V.resize(take<Eigen::Index>(bytes, at), 3);
   m.T.resize(take<Eigen::Index>(bytes, at), 4);
-  std::memcpy(m.V.data(), bytes.data() + at, sizeof(double) * m.V.size());
-  std::memcpy(m.T.data(), bytes.data() + at + sizeof(double) * m.V.size(), sizeof(int) * m.T.size());
+  std::copy_n(bytes.data() + at, sizeof(double) * m.V.size(), reinterpret_cast<char*>(m.V.data()));
+  std::copy_n(bytes.data() + at + sizeof(double) * m.V.size(), sizeof(int) * m.T.size(), reinterpret_cast<char*>(m.T.data()));
   switch (end) {
     case SessionEnd::kSizingFailure:
       throw SizingFailure{message};
@@ -253,8 +253,10 @@ TetMesh in_child_process(const std::function<TetMesh(VolumeMeshReport&, const Ch
 }
 
 // A session's time budget for about `tetrahedra`: far above what meshing takes (gmsh made
-// 200,000 tetrahedra of the phantom in 5 s, its passes included), far below the hour a loop runs.
-double session_budget(double tetrahedra) { return 30 + 1e-3 * tetrahedra; }
+// 200,000 tetrahedra of the phantom in 5 s, its passes included), at most 300 s.
+double session_budget(double tetrahedra) {
+  return std::isfinite(tetrahedra) && tetrahedra > 0 ? std::min(300.0, 30 + 1e-3 * tetrahedra) : 300.0;
+}
 
 // One gmsh session from the input triangles to the tetrahedra.
 TetMesh mesh_in_session(const SurfaceMesh& surface, const std::string& origin, const VolumeMeshOptions& options,

@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -84,24 +85,51 @@ ChildOutcome run_in_child(const std::function<std::string(const ChildProgress&)>
   }
   close(fds[1]);
 
+  // However this function ends (a progress callback that throws included), the child is
+  // reaped, and stopped first unless it has ended.
+  struct Child {
+    pid_t pid;
+    int fd;
+    bool ended = false;   // it has sent its last record or closed its end of the pipe
+    bool reaped = false;  // done with it
+    bool waited = false;  // and its status is known
+    int status = 0;
+    void reap() {
+      if (reaped) return;
+      reaped = true;
+      close(fd);
+      if (!ended) kill(pid, SIGKILL);
+      pid_t r;
+      while ((r = waitpid(pid, &status, 0)) < 0 && errno == EINTR) {
+      }
+      waited = r == pid;
+    }
+    ~Child() { reap(); }
+  } child_process{pid, fds[0]};
+
   ChildOutcome outcome;
-  bool finished = false;
+  bool finished = false, timed_out = false;
   std::string buffer, thrown;
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
   for (;;) {
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
     pollfd p{fds[0], POLLIN, 0};
-    const int ready = left.count() > 0 ? poll(&p, 1, static_cast<int>(left.count())) : 0;
+    // What is in the pipe is read even past the deadline: a result that came in time is not
+    // thrown away because this process was slow to look.
+    const int ready = poll(&p, 1, static_cast<int>(std::max<std::int64_t>(left.count(), 0)));
     if (ready < 0 && errno == EINTR) continue;
+    if (ready < 0) break;  // an error: the child is stopped
     if (ready == 0) {
-      kill(pid, SIGKILL);
-      outcome.status = ChildOutcome::Status::kTimedOut;
+      timed_out = !finished;  // with its result in, it is only ending
       break;
     }
     char chunk[65536];
-    const ssize_t n = ready > 0 ? read(fds[0], chunk, sizeof chunk) : -1;
+    const ssize_t n = read(fds[0], chunk, sizeof chunk);
     if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) break;  // the child closed its end: it has ended
+    if (n <= 0) {
+      child_process.ended = n == 0;
+      break;
+    }
     buffer.append(chunk, static_cast<size_t>(n));
     // Whole records off the front.
     std::uint64_t size = 0;
@@ -116,17 +144,22 @@ ChildOutcome run_in_child(const std::function<std::string(const ChildProgress&)>
       if (kind == kThrew) thrown = std::move(bytes);
     }
   }
-  close(fds[0]);
-  int wait_status = 0;
-  while (waitpid(pid, &wait_status, 0) < 0 && errno == EINTR) {
+  child_process.ended |= finished;
+  child_process.reap();
+  if (timed_out) {
+    outcome.status = ChildOutcome::Status::kTimedOut;
+    outcome.result.clear();
+    return outcome;
   }
-  if (outcome.status == ChildOutcome::Status::kTimedOut) return outcome;
-  if (finished && WIFEXITED(wait_status) && WEXITSTATUS(wait_status) == 0) {
+  const int status = child_process.status;
+  if (finished && child_process.waited && WIFEXITED(status) && WEXITSTATUS(status) == 0) {
     outcome.status = ChildOutcome::Status::kFinished;
     return outcome;
   }
   outcome.result.clear();
-  outcome.reason = thrown.empty() ? how_it_ended(wait_status) : "threw: " + thrown;
+  outcome.reason = !thrown.empty()          ? "threw: " + thrown
+                   : child_process.waited ? how_it_ended(status)
+                                          : "its end unknown (not waitable: SIGCHLD ignored?)";
   return outcome;
 }
 
