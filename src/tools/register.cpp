@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "insilico_case.h"
+#include "liver_sim/io/file_names.h"
 #include "liver_sim/io/surface_io.h"
 #include "liver_sim/scene/scene.h"
 #include "one_shot_session.h"
@@ -45,24 +46,17 @@ std::vector<double> numbers(const std::string& s) {
   return v;
 }
 
-std::string lower_extension(const std::string& path) {
-  const size_t dot = path.rfind('.');
-  std::string e = dot == std::string::npos ? "" : path.substr(dot);
-  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
-  return e;
-}
-
 // The data as points (m): a surface sampled, or a cloud as it is.
 pcl::PointCloud<pcl::PointXYZ> read_data(const std::string& path, double scale, double spacing) {
-  const std::string ext = lower_extension(path);
+  const std::string ext = file_extension(path);
   pcl::PointCloud<pcl::PointXYZ> cloud;
-  if (ext == ".pcd") {
+  if (ext == "pcd") {
     if (pcl::io::loadPCDFile(path, cloud) != 0) throw BadInput(path + ": not a readable PCD file");
   } else {
     try {
       return sample_surface(read_surface(path, scale), spacing, 0.0, 1);
     } catch (const MeshError& e) {
-      if (ext != ".ply") throw BadInput(e.what());
+      if (ext != "ply") throw BadInput(e.what());
       if (pcl::io::loadPLYFile(path, cloud) != 0) throw BadInput(path + ": neither a surface nor a point cloud PLY");
     }
   }

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "byte_cursor.h"
+#include "liver_sim/io/file_names.h"
 #include "liver_sim/io/surface_io.h"
 #include "vtk_polydata.h"
 
@@ -287,14 +288,6 @@ void read_vtk_surface(const std::string& bytes, const std::string& origin, RawSu
     }
 }
 
-std::string extension(const std::string& path) {
-  const size_t dot = path.rfind('.'), slash = path.rfind('/');
-  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
-  std::string e = path.substr(dot + 1);
-  for (char& c : e) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return e;
-}
-
 // ---- writers
 
 template <typename T>
@@ -386,7 +379,7 @@ void write_vtk_polydata(std::ostream& out, const SurfaceMesh& s, bool binary) {
 }  // namespace
 
 SurfaceFormat surface_format(const std::string& path) {
-  const std::string e = extension(path);
+  const std::string e = file_extension(path);
   if (e == "stl") return SurfaceFormat::Stl;
   if (e == "obj") return SurfaceFormat::Obj;
   if (e == "ply") return SurfaceFormat::Ply;

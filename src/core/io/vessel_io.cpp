@@ -8,25 +8,10 @@
 #include <sstream>
 #include <vector>
 
+#include "liver_sim/io/file_names.h"
 #include "vtk_polydata.h"
 
 namespace liver_sim {
-namespace {
-
-std::string extension(const std::string& path) {
-  const size_t dot = path.rfind('.');
-  std::string ext = dot == std::string::npos ? "" : path.substr(dot + 1);
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return ext;
-}
-
-// Union-find root with path halving.
-int root(std::vector<int>& parent, int i) {
-  while (parent[i] != i) i = parent[i] = parent[parent[i]];
-  return i;
-}
-
-}  // namespace
 
 VesselTree read_vessel_vtk(std::istream& stream, const std::string& origin, double scale, double wall_ratio) {
   std::ostringstream bytes;
@@ -132,7 +117,7 @@ VesselTree read_vessel_yaml(const std::string& text, const std::string& origin, 
 VesselTree read_vessel_tree(const std::string& path, double scale, double wall_ratio) {
   std::ifstream in(path);
   if (!in) throw VesselError(path + ": cannot open");
-  const std::string ext = extension(path);
+  const std::string ext = file_extension(path);
   if (ext == "vtk") return read_vessel_vtk(in, path, scale, wall_ratio);
   if (ext != "yaml" && ext != "yml") throw VesselError(path + ": unknown vessel format (expected .vtk, .yaml or .yml)");
   std::stringstream text;
