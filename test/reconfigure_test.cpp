@@ -160,8 +160,11 @@ TEST_F(Reconfigure, SolverSettingsChangeHowTheModelConverges) {
   // Out of its bounds a value is clamped by the config: at least one iteration.
   const dynamic_reconfigure::Config c = set({}, {{"max_iterations", 0}});
   ASSERT_FALSE(c.ints.empty());
-  for (const auto& p : c.ints)
-    if (p.name == "max_iterations") EXPECT_EQ(p.value, 1);
+  for (const auto& p : c.ints) {
+    if (p.name == "max_iterations") {
+      EXPECT_EQ(p.value, 1);
+    }
+  }
   set({{"tolerance", 1e-8}}, {{"max_iterations", 2}});
 }
 

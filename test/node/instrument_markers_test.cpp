@@ -106,8 +106,11 @@ TEST(InstrumentMarkers, AGraspersJawsHingeAtItsShaftsEndAndOpenBySide) {
     EXPECT_EQ(sides[0] + sides[1], 0.0) << "one jaw on each side of the shaft's axis";
     const double gap = (end(d.jaws[0], -1) - end(d.jaws[1], -1)).norm();
     EXPECT_NEAR(gap, 2 * (j.length * s + 0.5 * j.thickness * c), 1e-12);
-    if (closed) EXPECT_NEAR(gap, j.thickness, 1e-12) << "shut: side by side";
-    if (!closed) EXPECT_GT(gap, 2 * o.radius) << "open: the hold's sphere fits between the ends";
+    if (closed) {
+      EXPECT_NEAR(gap, j.thickness, 1e-12) << "shut: side by side";
+    } else {
+      EXPECT_GT(gap, 2 * o.radius) << "open: the hold's sphere fits between the ends";
+    }
   }
 }
 
