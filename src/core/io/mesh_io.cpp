@@ -18,7 +18,7 @@ namespace {
 
 using Tokens = TextTokens<MeshError>;
 
-// Nodes by file id and tetrahedra by node id, as read; turned into a TetMesh by finish().
+// Nodes by file id and tetrahedra by node id, as read; turned into a TetMesh by finish_mesh().
 struct RawMesh {
   std::vector<long long> node_id;
   std::vector<Eigen::Vector3d> node;
@@ -203,7 +203,7 @@ void read_vtk(Tokens& in, RawMesh& raw) {
   }
 }
 
-TetMesh finish(const std::string& path, RawMesh& raw, double scale) {
+TetMesh finish_mesh(const std::string& path, RawMesh& raw, double scale) {
   if (raw.tet.empty()) throw MeshError(path + ": no tetrahedra in the file");
   std::unordered_map<long long, int> index;
   for (size_t i = 0; i < raw.node_id.size(); ++i)
@@ -288,7 +288,7 @@ TetMesh read_mesh(std::istream& stream, const std::string& path, double scale) {
   } catch (const std::exception& e) {
     throw MeshError(path + ": " + e.what());
   }
-  return finish(path, raw, scale);
+  return finish_mesh(path, raw, scale);
 }
 
 void write_gmsh22(const std::string& path, const TetMesh& mesh) {

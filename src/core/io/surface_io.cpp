@@ -25,7 +25,7 @@ struct RawSurface {
   void add_polygon() { offsets.push_back(static_cast<long long>(corners.size())); }
 };
 
-SurfaceMesh finish(const std::string& origin, const RawSurface& raw, double scale) {
+SurfaceMesh finish_surface(const std::string& origin, const RawSurface& raw, double scale) {
   SurfaceMesh s;
   const long long n = static_cast<long long>(raw.vertices.size());
   if (n > std::numeric_limits<int>::max()) throw MeshError(origin + ": too many vertices");
@@ -417,7 +417,7 @@ SurfaceMesh read_surface(const std::string& bytes, SurfaceFormat format, const s
   } catch (const std::length_error&) {
     throw MeshError(origin + ": too large to read");
   }
-  return finish(origin, raw, scale);
+  return finish_surface(origin, raw, scale);
 }
 
 void write_surface(const std::string& path, const SurfaceMesh& surface, SurfaceEncoding encoding) {
