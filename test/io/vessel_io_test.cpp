@@ -11,7 +11,6 @@
 #include "liver_sim/simulation/liver_model.h"
 #include "regions.h"
 #include "liver_sim/geometry/vessel_tree.h"
-#include "liver_sim/io/file_names.h"
 #include "liver_sim/io/vessel_io.h"
 
 namespace liver_sim {
@@ -37,15 +36,6 @@ TEST(VesselTree, ReadsYamlWithScale) {
   EXPECT_DOUBLE_EQ(t.radius[0], 0.003);
   EXPECT_DOUBLE_EQ(t.wall_thickness[1], 0.0005);
   EXPECT_EQ(t.segments(1, 1), 2);
-}
-
-// The readers choose the format by the name's extension (killed: the folder check dropped, the
-// case kept, the dot kept).
-TEST(FileNames, TheExtensionIsTheNamesLowerCaseAndNotAFoldersDot) {
-  EXPECT_EQ(file_extension("trees/portal.VTK"), "vtk");
-  EXPECT_EQ(file_extension("/data/case.1/portal"), "");
-  EXPECT_EQ(file_extension("portal"), "");
-  EXPECT_EQ(file_extension("a.b/portal.yml"), "yml");
 }
 
 TEST(VesselTree, ReadsVtkPolylines) {
