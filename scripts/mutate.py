@@ -344,6 +344,18 @@ MUTATIONS = [
       "iteration_strategy().factorizes() && !factor_.fits(deadline_)",
       "false",
       "a later stage starts with a factorisation past the budget"),
+    M("R10", "include/liver_sim/stepper/newton_stepper.h",
+      "kRecoveryAfterRollbacks = 2;",
+      "kRecoveryAfterRollbacks = 1;",
+      "a recovery step after a single rollback"),
+    M("R11", "src/core/stepper/newton_stepper.cpp",
+      "    rollbacks_in_a_row_ = 0;\n    rotations_continued_",
+      "    rotations_continued_",
+      "a kept step leaves the count of rollbacks in a row"),
+    M("R12", "src/core/stepper/newton_loop.cpp",
+      "recovering_ ? std::max(solver_.max_iterations, kRecoveryIterations) : solver_.max_iterations",
+      "solver_.max_iterations",
+      "a recovery step held to the frame's iteration cap"),
 ]
 
 

@@ -31,6 +31,9 @@ void log_frame(const FrameReport& r) {
     ROS_ERROR_THROTTLE(1.0, "liver_sim: %s; the model keeps its last good state", r.step.message.c_str());
   if (r.state == SessionState::Diverged)
     ROS_WARN_THROTTLE(1.0, "liver_sim: step diverged (%s); kept the last good state", r.step.message.c_str());
+  if (r.step.recovery)
+    ROS_WARN_THROTTLE(1.0, "liver_sim: recovery step after steps rolled back in a row: %d iterations, %.0f ms",
+                      r.step.iterations, r.step.timing.total_ms);
 }
 
 SessionOptions session_options(const NodeOptions& o) {

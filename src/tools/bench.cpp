@@ -56,7 +56,8 @@ struct Spec {
 struct Run {
   std::vector<double> frame_ms;
   std::vector<Eigen::VectorXd> displacement;  // per frame
-  int newton_iterations = 0, factorizations = 0, background_factorizations = 0, linear_iterations = 0, diverged = 0;
+  int newton_iterations = 0, factorizations = 0, background_factorizations = 0, linear_iterations = 0, diverged = 0,
+      recoveries = 0;  // recovery steps (NewtonStepper::kRecoveryAfterRollbacks)
   long contacts = 0;  // loaded contacts, summed over the frames
   double factorization_ms = 0;
   std::string first_rollback;  // why the first rolled-back frame was
@@ -212,12 +213,14 @@ Run run(const std::string& scene_path, std::vector<std::string> overrides, const
     r.factorization_ms += s.timing.factorization_ms;
     r.contacts += s.contacts;
     if (s.status == StepResult::Status::Diverged && r.diverged++ == 0) r.first_rollback = s.message;
+    r.recoveries += s.recovery;
   }
   if (!quiet)
     std::cerr << "bench: " << spec.text << ", " << threads << " threads, load " << load << ": " << r.tets
               << " tetrahedra, " << frames << " frames, "
               << r.newton_iterations << " Newton iterations, " << r.factorizations << " factorisations";
   if (!quiet && r.diverged) std::cerr << ", " << r.diverged << " frames rolled back (first: " << r.first_rollback << ")";
+  if (!quiet && r.recoveries) std::cerr << ", " << r.recoveries << " recovery steps";
   if (!quiet) std::cerr << "\n";
   return r;
 }
@@ -340,7 +343,7 @@ int run_all(const Options& o) {
   std::ostream& out = o.csv.empty() ? std::cout : file;
   out << "scene,tetrahedra,dofs,strategy,iterations,tolerance,threads,load,frames,median_ms,mean_ms,p95_ms,fps,"
          "max_error,final_error,newton_iterations,linear_iterations,factorizations,factorization_ms,diverged,contacts,"
-         "background_factorizations\n"
+         "background_factorizations,recoveries\n"
       << std::setprecision(6);
   for (const Spec& spec : o.specs)
     for (int threads : o.thread_counts)
@@ -358,7 +361,7 @@ int run_all(const Options& o) {
             << ',' << final_error / peak << ',' << r.newton_iterations << ',' << r.linear_iterations << ','
             << r.factorizations << ',' << (r.factorizations ? r.factorization_ms / r.factorizations : 0.0) << ','
             << r.diverged << ',' << static_cast<double>(r.contacts) / frames << ',' << r.background_factorizations
-            << '\n' << std::flush;
+            << ',' << r.recoveries << '\n' << std::flush;
       }
   return 0;
 }

@@ -14,6 +14,13 @@
 // included. Only the CHOLMOD factor is not copied (its size is the factor's): a rolled-back step
 // that refactorised leaves it to be refactorised at the next step.
 //
+// Recovery: after kRecoveryAfterRollbacks steps rolled back in a row, a step is solved with
+// kRecoveryIterations iterations at least and kRecoveryBudgets time budgets. A real-time
+// frame's cap and budget, met again from the state they diverged from, diverge the same way:
+// every frame rolled back while the instruments move on, the model frozen (bench, the phantom
+// with a probe pressing and sweeping under breathing loads: 163-281 of 300 frames, from the
+// first divergence on; doc/robustness.md#recovery). One frame runs late instead.
+//
 // Time budget (SolverOptions::time_budget): past it, a step stops before the next Newton
 // iteration or instrument stage, NotConverged ("time budget"), and keeps the iterate, judged as
 // the iteration cap judges it (a stall rolls back). Every iterate is a state Newton would go on
@@ -47,6 +54,12 @@ class UpdateStrategy;
 
 class NewtonStepper {
  public:
+  // Recovery (above): after how many rollbacks in a row, with how many iterations at least and
+  // how many time budgets.
+  static constexpr int kRecoveryAfterRollbacks = 2;
+  static constexpr int kRecoveryIterations = 50;
+  static constexpr int kRecoveryBudgets = 10;
+
   // Analyses the matrix pattern (CHOLMOD). Throws std::invalid_argument for invalid options.
   NewtonStepper(MechanicalModel& mechanics, InstrumentContact& contact, const SolverOptions& solver);
   ~NewtonStepper();
@@ -176,9 +189,11 @@ class NewtonStepper {
   void restore(const Snapshot& s);
   Snapshot snapshot_;
   bool snapshot_valid_ = false;
+  int rollbacks_in_a_row_ = 0;  // steps rolled back since the last one kept
   InjectedFault fault_ = InjectedFault::None;
   long held_up_on_purpose_ = 0;
   std::chrono::steady_clock::time_point deadline_;  // of the step in progress (time_budget)
+  bool recovering_ = false;  // the step in progress is a recovery (kRecoveryAfterRollbacks)
 
   MechanicalModel& mechanics_;
   InstrumentContact& contact_;

@@ -34,6 +34,8 @@ struct StepResult {
   int contact_sweeps = 0;     // Gauss-Seidel sweeps of the contact solves in this step
   double residual = 0;      // force residual relative to the load norm, at the end
   bool out_of_time = false;  // the step stopped at SolverOptions::time_budget
+  bool recovery = false;     // after steps rolled back in a row, solved past the frame's iteration
+                             // cap and time budget (NewtonStepper::kRecoveryAfterRollbacks)
   StepTiming timing;
   std::string message;      // why, when not converged
   bool converged() const { return status == Status::Converged; }

@@ -101,14 +101,15 @@ bool NewtonStepper::solve_ends(Solve& s) {
     s.result.status = StepResult::Status::Converged;
     return true;
   }
-  if (s.done() == solver_.max_iterations) {
+  const int cap = recovering_ ? std::max(solver_.max_iterations, kRecoveryIterations) : solver_.max_iterations;
+  if (s.done() == cap) {
     // Capped but closer to equilibrium: kept, the next step continues (real-time frames).
     // No closer after all the iterations: stalled, rolled back like a divergence. A step
     // capped below kStallIterations is a real-time frame absorbing a new input, whose merit
     // may rise while the next frames continue from it; a runaway is still caught by the
     // blow-up, energy and finiteness checks.
-    if (s.merit >= s.start_merit && solver_.max_iterations >= kStallIterations) {
-      s.fail(stalled(s.merit, s.start_merit, solver_.max_iterations));
+    if (s.merit >= s.start_merit && cap >= kStallIterations) {
+      s.fail(stalled(s.merit, s.start_merit, cap));
     } else {
       s.result.message = "iteration cap";  // within the string's inline buffer: no allocation per frame
     }
@@ -127,7 +128,8 @@ bool NewtonStepper::iteration_out_of_time(Solve& s, bool fresh_factor) {
   if (s.result.iterations == 0 ||
       !(Clock::now() > deadline_ || (s.done() > 0 && fresh_factor && !factor_.fits(deadline_))))
     return false;
-  if (s.merit >= s.start_merit && s.done() >= kStallIterations && solver_.max_iterations >= kStallIterations) {
+  if (s.merit >= s.start_merit && s.done() >= kStallIterations &&
+      (solver_.max_iterations >= kStallIterations || recovering_)) {
     s.fail(stalled(s.merit, s.start_merit, s.done()));
   } else {
     s.result.out_of_time = true;

@@ -98,6 +98,7 @@ void NewtonStepper::set_positions(const Eigen::VectorXd& x) {
   x_ = x;
   state_energy_ = std::numeric_limits<double>::quiet_NaN();
   snapshot_valid_ = false;
+  rollbacks_in_a_row_ = 0;
 }
 
 void NewtonStepper::model_changed(bool refactorize) {
@@ -116,6 +117,7 @@ void NewtonStepper::reset() {
   rotations_continued_ = false;
   x_start_ = x_;
   time_ = 0;
+  rollbacks_in_a_row_ = 0;
 }
 
 double NewtonStepper::mechanical_energy(const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
@@ -233,9 +235,11 @@ StepResult NewtonStepper::step() {
 StepResult NewtonStepper::advance() {
   const auto t_step = Clock::now();
   // Beyond 1e6 s the budget is no limit in practice, and the clock's range holds it.
-  deadline_ = t_step + std::chrono::duration_cast<Clock::duration>(
-                           std::chrono::duration<double>(std::min(solver_.time_budget, 1e6)));
+  recovering_ = rollbacks_in_a_row_ >= kRecoveryAfterRollbacks;
+  const double budget = recovering_ ? kRecoveryBudgets * solver_.time_budget : solver_.time_budget;
+  deadline_ = t_step + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(std::min(budget, 1e6)));
   StepResult result;
+  result.recovery = recovering_;
   x_start_ = x_;
   if (fault_ == InjectedFault::NotPositiveDefinite) factor_.drop();  // a factorisation for the fault to meet
   const bool dynamic = solver_.mode == SolverOptions::Mode::Dynamic;
@@ -263,7 +267,9 @@ StepResult NewtonStepper::advance() {
   }
   if (result.status == StepResult::Status::Diverged) {
     restore(snapshot_);
+    ++rollbacks_in_a_row_;
   } else {
+    rollbacks_in_a_row_ = 0;
     rotations_continued_ = rotations_predicted;
     if (dynamic) {
       v_previous_.swap(v_);
