@@ -224,8 +224,8 @@ MUTATIONS = [
       "if (s.merit > 1e12 * std::max(s.start_merit, force_floor)) {",
       "residual blow-up detector a million times too lax"),
     M("NS10", "src/core/stepper/newton_loop.cpp",
-      "if (s.merit >= s.start_merit && solver_.max_iterations >= kStallIterations) {",
-      "if (s.merit >= 10 * s.start_merit && solver_.max_iterations >= kStallIterations) {",
+      "if (s.merit >= s.start_merit && cap >= kStallIterations) {",
+      "if (s.merit >= 10 * s.start_merit && cap >= kStallIterations) {",
       "stall detector ten times too lax"),
     M("NS11", "src/core/stepper/newton_stepper.cpp",
       "energy_after > 2 * (energy_before + std::abs(work))",
@@ -356,6 +356,10 @@ MUTATIONS = [
       "recovering_ ? std::max(solver_.max_iterations, kRecoveryIterations) : solver_.max_iterations",
       "solver_.max_iterations",
       "a recovery step held to the frame's iteration cap"),
+    M("R13", "src/core/stepper/newton_stepper.cpp",
+      "rollbacks_in_a_row_ = recovering_ ? 0 : rollbacks_in_a_row_ + 1;",
+      "rollbacks_in_a_row_ = rollbacks_in_a_row_ + 1;",
+      "recovery steps one after another while they diverge"),
 ]
 
 

@@ -122,11 +122,11 @@ INSTANTIATE_TEST_SUITE_P(EveryInstrumentEveryFailure, Rollback, testing::ValuesI
 
 // A step rolled back is retried as an ordinary frame; after two rolled back in a row, the next is
 // a recovery step, solved past the frame's iteration cap to the tolerance; the step after it is
-// ordinary again. The suction cube's static step needs several iterations, so a frame capped at
-// one ends short of equilibrium.
+// ordinary again, and so is the step after a recovery step that diverged. The suction cube's
+// static step needs several iterations, so a frame capped at one ends short of equilibrium.
 // Kills (each tried): a recovery after a single rollback (every injected fault of the soak would
-// cost a long frame), a count of rollbacks that a kept step does not reset, and a recovery step
-// held to the frame's cap.
+// cost a long frame), a count of rollbacks that a kept step does not reset, a recovery step held
+// to the frame's cap, and recovery steps one after another while they diverge.
 TEST(Recovery, ASecondRollbackInARowIsFollowedByARecoveryStep) {
   Scene s = aspiration_cube();
   s.solver.max_iterations = 1;
@@ -147,6 +147,10 @@ TEST(Recovery, ASecondRollbackInARowIsFollowedByARecoveryStep) {
   ordinary_frame("one rollback");
   failed_step();
   ordinary_frame("one rollback after a kept step");
+  failed_step();
+  failed_step();
+  failed_step();  // the recovery step, diverged
+  ordinary_frame("a recovery step that diverged");
   failed_step();
   failed_step();
   const StepResult recovery = m.step();

@@ -14,12 +14,14 @@
 // included. Only the CHOLMOD factor is not copied (its size is the factor's): a rolled-back step
 // that refactorised leaves it to be refactorised at the next step.
 //
-// Recovery: after kRecoveryAfterRollbacks steps rolled back in a row, a step is solved with
-// kRecoveryIterations iterations at least and kRecoveryBudgets time budgets. A real-time
-// frame's cap and budget, met again from the state they diverged from, diverge the same way:
-// every frame rolled back while the instruments move on, the model frozen (bench, the phantom
-// with a probe pressing and sweeping under breathing loads: 163-281 of 300 frames, from the
-// first divergence on; doc/robustness.md#recovery). One frame runs late instead.
+// Recovery: after kRecoveryAfterRollbacks steps in a row diverged (a detector fired; a step
+// that throws is rolled back but not counted), a step is solved with kRecoveryIterations
+// iterations at least and kRecoveryBudgets time budgets. A real-time frame's cap and budget,
+// met again from the state they diverged from, with the instruments as far on or farther, can
+// diverge again frame after frame while the instruments move on: the model frozen (bench, the
+// phantom with a probe pressing and sweeping under breathing loads: 163-281 of 300 frames rolled
+// back; doc/robustness.md#recovery). One frame runs late instead; if it diverges too, the count
+// starts again.
 //
 // Time budget (SolverOptions::time_budget): past it, a step stops before the next Newton
 // iteration or instrument stage, NotConverged ("time budget"), and keeps the iterate, judged as
@@ -160,6 +162,8 @@ class NewtonStepper {
   // Whether the solve ends before another iteration: non-finite, blown up, converged, capped.
   bool solve_ends(Solve& s);
   bool iteration_out_of_time(Solve& s, bool fresh_factor);
+  // Newton iterations a solve may take: the solver's, or a recovery step's.
+  int iteration_cap() const;
   // The matrix and factor the strategy asks for, and its update into dx_; false when it failed.
   bool newton_update(UpdateStrategy& update, Solve& s, bool fresh_factor);
   bool factorize(StepResult& result);
@@ -189,7 +193,7 @@ class NewtonStepper {
   void restore(const Snapshot& s);
   Snapshot snapshot_;
   bool snapshot_valid_ = false;
-  int rollbacks_in_a_row_ = 0;  // steps rolled back since the last one kept
+  int rollbacks_in_a_row_ = 0;  // steps that diverged since the last one kept or recovery step
   InjectedFault fault_ = InjectedFault::None;
   long held_up_on_purpose_ = 0;
   std::chrono::steady_clock::time_point deadline_;  // of the step in progress (time_budget)

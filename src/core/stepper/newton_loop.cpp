@@ -62,7 +62,7 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     // short: the factor no longer fits the state. Redone on a fresh one, once per Newton solve
     // (per instrument stage), instead of spent. A cut contact update leaves the gaps it was to
     // close open, frame after frame while the factor is kept (doc/performance.md).
-    const bool no_descent = taken.merit >= s.merit && (!taken.accepted || s.done() == solver_.max_iterations);
+    const bool no_descent = taken.merit >= s.merit && (!taken.accepted || s.done() == iteration_cap());
     if (update.redoes_without_descent() && !fresh_factor && !s.refreshed &&
         (no_descent || (contact_update && taken.alpha < 1))) {
       if (!undo_for_fresh_factor(s, contact_update)) break;
@@ -101,7 +101,7 @@ bool NewtonStepper::solve_ends(Solve& s) {
     s.result.status = StepResult::Status::Converged;
     return true;
   }
-  const int cap = recovering_ ? std::max(solver_.max_iterations, kRecoveryIterations) : solver_.max_iterations;
+  const int cap = iteration_cap();
   if (s.done() == cap) {
     // Capped but closer to equilibrium: kept, the next step continues (real-time frames).
     // No closer after all the iterations: stalled, rolled back like a divergence. A step
@@ -118,6 +118,10 @@ bool NewtonStepper::solve_ends(Solve& s) {
   return false;
 }
 
+int NewtonStepper::iteration_cap() const {
+  return recovering_ ? std::max(solver_.max_iterations, kRecoveryIterations) : solver_.max_iterations;
+}
+
 bool NewtonStepper::iteration_out_of_time(Solve& s, bool fresh_factor) {
   // Out of time: the iterate is kept, judged as at the cap (a stall needs kStallIterations
   // iterations to judge). The first iteration of a step always runs, so that every frame moves
@@ -128,8 +132,7 @@ bool NewtonStepper::iteration_out_of_time(Solve& s, bool fresh_factor) {
   if (s.result.iterations == 0 ||
       !(Clock::now() > deadline_ || (s.done() > 0 && fresh_factor && !factor_.fits(deadline_))))
     return false;
-  if (s.merit >= s.start_merit && s.done() >= kStallIterations &&
-      (solver_.max_iterations >= kStallIterations || recovering_)) {
+  if (s.merit >= s.start_merit && s.done() >= kStallIterations && iteration_cap() >= kStallIterations) {
     s.fail(stalled(s.merit, s.start_merit, s.done()));
   } else {
     s.result.out_of_time = true;

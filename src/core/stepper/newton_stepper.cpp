@@ -267,7 +267,9 @@ StepResult NewtonStepper::advance() {
   }
   if (result.status == StepResult::Status::Diverged) {
     restore(snapshot_);
-    ++rollbacks_in_a_row_;
+    // A recovery step that diverges too is followed by ordinary frames again: at most one
+    // frame in three runs long while the model does not recover.
+    rollbacks_in_a_row_ = recovering_ ? 0 : rollbacks_in_a_row_ + 1;
   } else {
     rollbacks_in_a_row_ = 0;
     rotations_continued_ = rotations_predicted;
