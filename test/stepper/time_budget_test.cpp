@@ -1,5 +1,6 @@
 // Steps within a time budget: one iteration per step still reaches the equilibrium, a step out
-// of time keeps its stage, a factor refresh that does not fit waits.
+// of time keeps its stage, a frame far from equilibrium iterates past its cap, a factor refresh
+// that does not fit waits.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -11,6 +12,7 @@
 #include "liver_sim/simulation/liver_model.h"
 #include "liver_sim/geometry/mesh.h"
 #include "liver_sim/simulation/step_guard.h"
+#include "liver_sim/stepper/newton_stepper.h"
 #include "simulation/scenes.h"
 
 namespace liver_sim {
@@ -134,6 +136,28 @@ TEST(TimeBudget, ANoDescentRefreshPastTheBudgetWaitsForTheNextStep) {
   EXPECT_EQ(next.factorizations, 1);
   EXPECT_LE((late->positions() - unlimited->positions()).cwiseAbs().maxCoeff(),
             1e-9 * (unlimited->positions() - start).cwiseAbs().maxCoeff());
+}
+
+// Modified Newton on the factor of 0.6 of the suction, asked for the full suction with one
+// iteration a frame: that iteration leaves the residual far above kDriftResidual. Without a time
+// budget the cap holds: one iteration. With a budget (10 s, far more than the frame needs) the
+// frame iterates on past its cap until its residual is below kDriftResidual, and stops there, at
+// the cap's message, not at the budget nor at the solver's tolerance.
+// Kills the rule left out (one iteration; mutation R14), the rule without a budget too (R15) and
+// the residual's comparison turned round (R16), each tried.
+TEST(TimeBudget, AFrameFarFromEquilibriumIteratesPastItsCapWithinItsBudget) {
+  Scene s = aspiration_cube();
+  s.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
+  const StepResult capped = partly_loaded(s, 0.6, 1, std::numeric_limits<double>::infinity())->step();
+  EXPECT_EQ(capped.iterations, 1) << "without a time budget the cap holds";
+  ASSERT_GT(capped.residual, NewtonStepper::kDriftResidual) << "one iteration came close: the scene no longer tests the rule";
+
+  const StepResult frame = partly_loaded(s, 0.6, 1, 10.0)->step();
+  EXPECT_GT(frame.iterations, 1);
+  EXPECT_FALSE(frame.out_of_time);
+  EXPECT_EQ(frame.status, StepResult::Status::NotConverged) << frame.message;
+  EXPECT_EQ(frame.message, "iteration cap");
+  EXPECT_LE(frame.residual, NewtonStepper::kDriftResidual);
 }
 
 // Modified Newton on the factor of 0.6 of the suction, asked for the full suction in two

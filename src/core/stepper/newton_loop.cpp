@@ -102,7 +102,7 @@ bool NewtonStepper::solve_ends(Solve& s) {
     return true;
   }
   const int cap = iteration_cap();
-  if (s.done() == cap) {
+  if (s.done() >= cap && !drifting(s)) {
     // Capped but closer to equilibrium: kept, the next step continues (real-time frames).
     // No closer after all the iterations: stalled, rolled back like a divergence. A step
     // capped below kStallIterations is a real-time frame absorbing a new input, whose merit
@@ -116,6 +116,12 @@ bool NewtonStepper::solve_ends(Solve& s) {
     return true;
   }
   return false;
+}
+
+bool NewtonStepper::drifting(const Solve& s) const {
+  // Frames far from equilibrium (newton_stepper.h): on within the budget, which
+  // iteration_out_of_time holds.
+  return std::isfinite(solver_.time_budget) && s.result.residual > kDriftResidual && s.done() < kRecoveryIterations;
 }
 
 int NewtonStepper::iteration_cap() const {
