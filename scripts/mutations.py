@@ -325,7 +325,11 @@ MUTATIONS = [
       "return s.result.residual",
       "a step without a time budget iterates past its cap"),
     M("R16", "src/core/stepper/newton_loop.cpp",
-      "s.result.residual > kDriftResidual",
-      "s.result.residual < kDriftResidual",
+      "s.result.residual > solver_.capped_residual",
+      "s.result.residual < solver_.capped_residual",
       "frames iterate on past the cap when near equilibrium, not when far from it"),
+    M("R17", "src/core/registration/registration.cpp",
+      "frame_solver.capped_residual = std::numeric_limits<double>::infinity();",
+      "",
+      "a cloud's frame iterates on past its iterations far from equilibrium"),
 ]

@@ -158,6 +158,28 @@ TEST(PhantomRegistration, AFrameOutOfTimeLeavesItsUpdatesToTheNextFrames) {
   EXPECT_EQ(timed.model->positions(), spread.model->positions());
 }
 
+TEST(PhantomRegistration, ACloudsFrameTakesItsIterationsOnlyFarFromEquilibrium) {
+  // A cloud's frame under a time budget (10 s, far more than it needs) ends at
+  // registration.newton_iterations although its residual is above solver.capped_residual: the
+  // model converges on the cloud over the frames that follow (refine()), and a frame that
+  // iterated on would take the time of the next cloud. Killed by the registration's frames
+  // iterating on (mutation R17, tried).
+  Phantom p(5.0);
+  SolverOptions budget = p.model->solver_options();
+  budget.time_budget = 10.0;
+  ASSERT_EQ(p.model->set_solver_options(budget), "");
+  RegistrationOptions o = p.scene.registration;
+  o.frame_updates = 1;
+  SurfaceRegistration registration(*p.model, o);
+  const CameraView v = p.view(1e-3, 0.0, 10);
+  const RegistrationFrame f =
+      registration.register_cloud(render_surface_cloud(p.truth->positions(), p.model->boundary(), v).cloud, v.eye);
+  ASSERT_NE(f.step.status, StepResult::Status::Diverged) << f.step.message;
+  EXPECT_EQ(f.newton_iterations, o.newton_iterations);
+  EXPECT_GT(f.step.residual, budget.capped_residual);  // ended far from equilibrium: the case tests the rule
+  EXPECT_EQ(p.model->solver_options().capped_residual, budget.capped_residual) << "the scene's solver again after the frame";
+}
+
 TEST(PhantomRegistration, PointsBeyondTheGateAreFoundOnceTheSurfaceComesNear) {
   // Points 4 mm above the top of the right lobe pull it up; others 15.1-17 mm above it lie
   // beyond the 15 mm gate until the surface has come near. Later updates search again only

@@ -44,6 +44,8 @@ TEST(Bounds, EachFieldThatSizesWorkOrLiesBeyondTissueHasOne) {
                "solver.max_iterations", "10000");
   expect_bound(SolverOptions{}, [](auto& o, double v) { o.time_budget = v; }, std::numeric_limits<double>::infinity(), 0,
                "solver.time_budget", "(0, inf]");
+  expect_bound(SolverOptions{}, [](auto& o, double v) { o.capped_residual = v; }, std::numeric_limits<double>::infinity(),
+               0, "solver.capped_residual", "(0, inf]");
   expect_bound(ContactOptions{}, [](auto& o, double v) { o.alarm_distance = v; }, 0.01, 0.02, "contact.alarm_distance",
                "0.01");
   expect_bound(ContactOptions{}, [](auto& o, double v) { o.friction = v; }, 10, 11, "contact.friction", "10");

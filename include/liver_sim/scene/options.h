@@ -106,6 +106,10 @@ struct SolverOptions {
   // or instrument stage in progress, NotConverged, and the next step continues from its iterate
   // (newton_stepper.h). The first iteration of a step always runs, so that frames progress.
   double time_budget = std::numeric_limits<double>::infinity();
+  // With a time budget: a step that reaches max_iterations with its residual (relative, as
+  // tolerance) above this iterates on, within half the budget, to 50 iterations; in (0, inf],
+  // inf: never (newton_stepper.h, doc/robustness.md#frames-far-from-equilibrium).
+  double capped_residual = 3e-3;
   // The strategies that keep a factor (modified Newton, Newton-Krylov, reused-factor CG): a
   // refresh their judgement of the factor asks for is factorised on a thread of its own at a
   // lower priority while the iterations go on with the old factor, and replaces it when done

@@ -31,11 +31,13 @@
 // state instead would repeat the same frame for ever when one iteration (or one rising-merit
 // iteration of a real-time frame) does not fit in the budget. Out of time between stages, the
 // instruments stay at the last stage's pose and the next step stages on from there.
-// With a budget, a frame that reaches its iteration cap with its residual above kDriftResidual
-// of the forces iterates on within the budget (to kRecoveryIterations): a frame ended that far
-// off starts the next one farther off, until a surface point ends inside an instrument (the
-// phantom's probe sweep at 33 ms frames, two iterations each: 4.6% error, 114% at 1/30 s;
-// doc/robustness.md#frames-far-from-equilibrium). Without a budget the cap is the frame's cost.
+// With a budget, a frame that reaches its iteration cap with its residual above
+// SolverOptions::capped_residual of the forces iterates on, within kDriftBudgetShare of the budget (to kRecoveryIterations): a
+// frame ended that far off starts the next one farther off, until a surface point ends inside
+// an instrument (the phantom's probe sweep at 33 ms frames, two iterations each: 4.6% error, 114%
+// at 1/30 s; doc/robustness.md#frames-far-from-equilibrium). The rest of the budget is the
+// frame's other work (a cloud's registration, the publication): a step that took all of it cost
+// the node's soak 2-3 frames a second. Without a budget the cap is the frame's cost.
 //
 // It asks the contact (instrument_contact.h) for the contact forces, violation and constrained
 // update, and hands it its factor; it may not look inside the element sets or the contact rows.
@@ -66,9 +68,9 @@ class NewtonStepper {
   static constexpr int kRecoveryAfterRollbacks = 2;
   static constexpr int kRecoveryIterations = 50;
   static constexpr int kRecoveryBudgets = 10;
-  // Frames far from equilibrium (above): the residual, relative to the forces at play, above
-  // which a frame with a time budget iterates past its cap.
-  static constexpr double kDriftResidual = 3e-3;
+  // Frames far from equilibrium (above): the share of the time budget, from the step's start,
+  // within which they iterate on.
+  static constexpr double kDriftBudgetShare = 0.5;
 
   // Analyses the matrix pattern (CHOLMOD). Throws std::invalid_argument for invalid options.
   NewtonStepper(MechanicalModel& mechanics, InstrumentContact& contact, const SolverOptions& solver);
@@ -172,7 +174,7 @@ class NewtonStepper {
   bool iteration_out_of_time(Solve& s, bool fresh_factor);
   // Newton iterations a solve may take: the solver's, or a recovery step's.
   int iteration_cap() const;
-  // Past the cap, a frame with a time budget whose residual is above kDriftResidual iterates on.
+  // Past the cap, a frame with a time budget whose residual is above capped_residual iterates on.
   bool drifting(const Solve& s) const;
   // The matrix and factor the strategy asks for, and its update into dx_; false when it failed.
   bool newton_update(UpdateStrategy& update, Solve& s, bool fresh_factor);
@@ -207,6 +209,7 @@ class NewtonStepper {
   InjectedFault fault_ = InjectedFault::None;
   long held_up_on_purpose_ = 0;
   std::chrono::steady_clock::time_point deadline_;  // of the step in progress (time_budget)
+  std::chrono::steady_clock::time_point drift_deadline_;  // frames far from equilibrium iterate on until it
   bool recovering_ = false;  // the step in progress is a recovery (kRecoveryAfterRollbacks)
 
   MechanicalModel& mechanics_;

@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include "liver_sim/geometry/node_positions.h"
@@ -229,6 +230,8 @@ void SurfaceRegistration::solve(RegistrationFrame& frame) {
   SolverOptions frame_solver = scene_solver;
   frame_solver.strategy = options_.strategy;
   frame_solver.max_iterations = options_.newton_iterations;
+  // The model converges on a cloud over the frames that follow it (refine()), not in this one.
+  frame_solver.capped_residual = std::numeric_limits<double>::infinity();
   // The scene's time budget is the frame's: the search and the solves before took their share.
   auto budget_left = [&] { return std::max(scene_solver.time_budget - ms_since(frame_start_) / 1000, 1e-6); };
   frame_solver.time_budget = budget_left();

@@ -93,7 +93,8 @@ std::string validate(const SolverOptions& o) {
                           ? ""
                           : message("solver.threads", ("in [1, " + std::to_string(WorkerPool::kMaxThreads) + "]").c_str(),
                                     o.threads),
-                      o.time_budget > 0 ? "" : message("solver.time_budget", "in (0, inf] s", o.time_budget)});
+                      o.time_budget > 0 ? "" : message("solver.time_budget", "in (0, inf] s", o.time_budget),
+                      o.capped_residual > 0 ? "" : message("solver.capped_residual", "in (0, inf]", o.capped_residual)});
 }
 
 std::string validate(const VesselOptions& o) {

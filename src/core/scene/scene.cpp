@@ -400,7 +400,7 @@ class Reader {
   void read_solver(const YAML::Node& v, SolverOptions& o) const {
     check_keys(v, "solver", {"mode", "strategy", "predictor", "dt", "steps", "max_iterations", "tolerance",
                              "line_search", "rayleigh_mass", "rayleigh_stiffness", "threads", "time_budget",
-                             "background_refresh"});
+                             "capped_residual", "background_refresh"});
     if (v["strategy"]) o.strategy = strategy(v["strategy"], "solver.strategy");
     if (v["predictor"]) {
       const std::string p = word(v["predictor"], "solver.predictor", {"none", "constant_velocity", "constant_acceleration"});
@@ -420,6 +420,7 @@ class Reader {
     if (v["rayleigh_stiffness"]) o.rayleigh_stiffness = number(v["rayleigh_stiffness"], "solver.rayleigh_stiffness");
     if (v["threads"]) o.threads = integer(v["threads"], "solver.threads");
     if (v["time_budget"]) o.time_budget = number(v["time_budget"], "solver.time_budget");
+    if (v["capped_residual"]) o.capped_residual = number(v["capped_residual"], "solver.capped_residual");
     if (v["background_refresh"]) o.background_refresh = boolean(v["background_refresh"], "solver.background_refresh");
   }
 

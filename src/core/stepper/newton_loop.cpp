@@ -119,9 +119,9 @@ bool NewtonStepper::solve_ends(Solve& s) {
 }
 
 bool NewtonStepper::drifting(const Solve& s) const {
-  // Frames far from equilibrium (newton_stepper.h): on within the budget, which
-  // iteration_out_of_time holds.
-  return std::isfinite(solver_.time_budget) && s.result.residual > kDriftResidual && s.done() < kRecoveryIterations;
+  // Frames far from equilibrium (newton_stepper.h).
+  return std::isfinite(solver_.time_budget) && s.result.residual > solver_.capped_residual && s.done() < kRecoveryIterations &&
+         Clock::now() < drift_deadline_;
 }
 
 int NewtonStepper::iteration_cap() const {

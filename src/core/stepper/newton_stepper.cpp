@@ -237,7 +237,11 @@ StepResult NewtonStepper::advance() {
   // Beyond 1e6 s the budget is no limit in practice, and the clock's range holds it.
   recovering_ = rollbacks_in_a_row_ >= kRecoveryAfterRollbacks;
   const double budget = recovering_ ? kRecoveryBudgets * solver_.time_budget : solver_.time_budget;
-  deadline_ = t_step + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(std::min(budget, 1e6)));
+  const auto seconds = [](double s) {
+    return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(std::min(s, 1e6)));
+  };
+  deadline_ = t_step + seconds(budget);
+  drift_deadline_ = t_step + seconds(kDriftBudgetShare * budget);
   StepResult result;
   result.recovery = recovering_;
   x_start_ = x_;
