@@ -23,7 +23,7 @@ loads:
   - {type: gravity, acceleration: [0, 0, -9.81]}
   - {type: force, total: [0, 0.5, 0], region: {box: {min: [0, 0, 0], max: [1, 1, 1]}}}
 solver: {mode: dynamic, predictor: constant_acceleration, dt: 0.001, steps: 20, max_iterations: 5, tolerance: 1e-7, line_search: false,
-         rayleigh_mass: 0.5, rayleigh_stiffness: 0.01}
+         rayleigh_mass: 0.5, rayleigh_stiffness: 0.01, time_budget: 0.02, capped_residual: 0.01}
 probes: [{name: centre, point: [0.0075, 0.0075, 0.015]}]
 )";
 
@@ -72,6 +72,8 @@ TEST(Scene, ParsesEverySection) {
   EXPECT_EQ(s.solver.steps, 20);
   EXPECT_FALSE(s.solver.line_search);
   EXPECT_EQ(s.solver.rayleigh_stiffness, 0.01);
+  EXPECT_EQ(s.solver.time_budget, 0.02);
+  EXPECT_EQ(s.solver.capped_residual, 0.01);
   EXPECT_EQ(s.solver.predictor, SolverOptions::Predictor::ConstantAcceleration);
   ASSERT_EQ(s.probes.size(), 1u);
   EXPECT_EQ(s.probes[0].point.z(), 0.015);

@@ -32,12 +32,13 @@
 // iteration of a real-time frame) does not fit in the budget. Out of time between stages, the
 // instruments stay at the last stage's pose and the next step stages on from there.
 // With a budget, a frame that reaches its iteration cap with its residual above
-// SolverOptions::capped_residual of the forces iterates on, within kDriftBudgetShare of the budget (to kRecoveryIterations): a
-// frame ended that far off starts the next one farther off, until a surface point ends inside
-// an instrument (the phantom's probe sweep at 33 ms frames, two iterations each: 4.6% error, 114%
-// at 1/30 s; doc/robustness.md#frames-far-from-equilibrium). The rest of the budget is the
-// frame's other work (a cloud's registration, the publication): a step that took all of it cost
-// the node's soak 2-3 frames a second. Without a budget the cap is the frame's cost.
+// SolverOptions::capped_residual iterates on, to kRecoveryIterations in the step, and no
+// iteration past the cap (its factorisation included) runs beyond kDriftBudgetShare of the
+// budget: a frame ended that far off starts the next one farther off, until a surface point ends
+// inside an instrument (the phantom's probe sweep at 33 ms frames, two iterations each: 4.6%
+// error, 114% at 1/30 s; doc/robustness.md#frames-far-from-equilibrium). The rest of the budget
+// is the frame's other work (a cloud's registration, the publication): a step that took all of it
+// cost the node's soak 2-3 frames a second. Without a budget the cap is the frame's cost.
 //
 // It asks the contact (instrument_contact.h) for the contact forces, violation and constrained
 // update, and hands it its factor; it may not look inside the element sets or the contact rows.
@@ -176,6 +177,9 @@ class NewtonStepper {
   int iteration_cap() const;
   // Past the cap, a frame with a time budget whose residual is above capped_residual iterates on.
   bool drifting(const Solve& s) const;
+  // The deadline of a solve's iteration (1, 2, ...): past the cap, a frame far from equilibrium
+  // is held to drift_deadline_, its factorisations included.
+  std::chrono::steady_clock::time_point deadline_of(int iteration) const;
   // The matrix and factor the strategy asks for, and its update into dx_; false when it failed.
   bool newton_update(UpdateStrategy& update, Solve& s, bool fresh_factor);
   bool factorize(StepResult& result);

@@ -109,7 +109,7 @@ bool NewtonStepper::solve_ends(Solve& s) {
     // may rise while the next frames continue from it; a runaway is still caught by the
     // blow-up, energy and finiteness checks.
     if (s.merit >= s.start_merit && cap >= kStallIterations) {
-      s.fail(stalled(s.merit, s.start_merit, cap));
+      s.fail(stalled(s.merit, s.start_merit, s.done()));
     } else {
       s.result.message = "iteration cap";  // within the string's inline buffer: no allocation per frame
     }
@@ -120,8 +120,12 @@ bool NewtonStepper::solve_ends(Solve& s) {
 
 bool NewtonStepper::drifting(const Solve& s) const {
   // Frames far from equilibrium (newton_stepper.h).
-  return std::isfinite(solver_.time_budget) && s.result.residual > solver_.capped_residual && s.done() < kRecoveryIterations &&
-         Clock::now() < drift_deadline_;
+  return std::isfinite(solver_.time_budget) && s.result.residual > solver_.capped_residual &&
+         s.result.iterations < kRecoveryIterations && Clock::now() < drift_deadline_;
+}
+
+Clock::time_point NewtonStepper::deadline_of(int iteration) const {
+  return iteration > iteration_cap() ? drift_deadline_ : deadline_;
 }
 
 int NewtonStepper::iteration_cap() const {
@@ -135,8 +139,9 @@ bool NewtonStepper::iteration_out_of_time(Solve& s, bool fresh_factor) {
   // factorisation that the time left cannot hold starts the next step instead: an iteration
   // and a factorisation in one real-time frame overrun it by the factorisation, and the inputs
   // that arrive meanwhile (clouds, poses) wait or are replaced.
+  const Clock::time_point deadline = deadline_of(s.done() + 1);
   if (s.result.iterations == 0 ||
-      !(Clock::now() > deadline_ || (s.done() > 0 && fresh_factor && !factor_.fits(deadline_))))
+      !(Clock::now() > deadline || (s.done() > 0 && fresh_factor && !factor_.fits(deadline))))
     return false;
   if (s.merit >= s.start_merit && s.done() >= kStallIterations && iteration_cap() >= kStallIterations) {
     s.fail(stalled(s.merit, s.start_merit, s.done()));
@@ -244,7 +249,7 @@ bool NewtonStepper::undo_for_fresh_factor(Solve& s, bool contact_update) {
   // budget, the frame ends where the iteration started, and the next one starts with it.
   factor_.mark_stale();
   if (contact_update) contact_.scale_update(0.0);
-  const bool fits = factor_.fits(deadline_);
+  const bool fits = factor_.fits(deadline_of(s.done()));
   if (fits) {
     s.refreshed = true;
     --s.result.iterations;
