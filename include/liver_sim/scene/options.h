@@ -107,8 +107,9 @@ struct SolverOptions {
   // (newton_stepper.h). The first iteration of a step always runs, so that frames progress.
   double time_budget = std::numeric_limits<double>::infinity();
   // With a time budget: a step that reaches max_iterations with its residual (relative, as
-  // tolerance) above this iterates on, within half the budget, to 50 iterations; in (0, inf],
-  // inf: never (newton_stepper.h, doc/robustness.md#frames-far-from-equilibrium).
+  // tolerance) above this iterates on, within half the budget, to 50 iterations; in (0, inf].
+  // Infinity turns it off; in a scene, whose YAML cannot give inf, 1e6 does (newton_stepper.h,
+  // doc/robustness.md#frames-far-from-equilibrium).
   double capped_residual = 3e-3;
   // The strategies that keep a factor (modified Newton, Newton-Krylov, reused-factor CG): a
   // refresh their judgement of the factor asks for is factorised on a thread of its own at a
