@@ -140,6 +140,7 @@ void StatusPublisher::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   stat.summary(level, state_word(state));
   stat.add("steps", session_.steps());
   stat.add("factorisations in the steps", session_.factorizations());  // the frames' largest cost
+  stat.add("steps iterated past their cap", session_.steps_past_cap());  // solver.capped_residual
   stat.add("last step time (s)", last.timing.total_ms / 1000.0);
   stat.add("residual", last.residual);
   stat.add("active contacts", last.contacts);

@@ -124,6 +124,7 @@ class TrackingSession {
   const StepResult& last_step() const { return last_; }
   uint64_t steps() const { return steps_; }                    // since start or reset
   uint64_t factorizations() const { return factorizations_; }  // in those steps
+  uint64_t steps_past_cap() const { return steps_past_cap_; }  // of those, far from equilibrium at their cap
   uint64_t faults() const { return guard_.faults(); }
   const std::string& last_fault() const { return guard_.last_fault(); }
   SessionState state() const { return state_; }
@@ -166,7 +167,7 @@ class TrackingSession {
   // Simulation thread only.
   bool must_step_ = true;  // the first step brings the scene's loads to equilibrium
   StepResult last_;
-  uint64_t steps_ = 0, factorizations_ = 0;
+  uint64_t steps_ = 0, factorizations_ = 0, steps_past_cap_ = 0;
   SessionState state_ = SessionState::Idle;
   Stamp reflected_stamp_ = 0;
   uint64_t clouds_registered_ = 0;

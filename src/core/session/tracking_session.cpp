@@ -227,7 +227,7 @@ void TrackingSession::apply_reset(const Reset& reset) {
   clouds_registered_ = 0;
   registered_ = RegistrationFrame();
   analysis_.reset();  // an analysis still running describes the state before
-  steps_ = factorizations_ = 0;
+  steps_ = factorizations_ = steps_past_cap_ = 0;
   reflected_stamp_ = 0;
 }
 
@@ -390,6 +390,7 @@ void TrackingSession::simulate(FrameReport& report) {
   if (r.status != StepResult::Status::Diverged) start_analysis(report);
   ++steps_;
   factorizations_ += factorized;
+  steps_past_cap_ += r.past_cap;
   last_ = r;
   state_ = r.status == StepResult::Status::Diverged ? SessionState::Diverged
            : r.converged()                           ? SessionState::Converged

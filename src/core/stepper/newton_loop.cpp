@@ -102,7 +102,11 @@ bool NewtonStepper::solve_ends(Solve& s) {
     return true;
   }
   const int cap = iteration_cap();
-  if (s.done() >= cap && !drifting(s)) {
+  if (s.done() >= cap && drifting(s)) {
+    s.result.past_cap = true;
+    return false;
+  }
+  if (s.done() >= cap) {
     // Capped but closer to equilibrium: kept, the next step continues (real-time frames).
     // No closer after all the iterations: stalled, rolled back like a divergence. A step
     // capped below kStallIterations is a real-time frame absorbing a new input, whose merit
