@@ -54,7 +54,7 @@ ros::WallTime last_analysis;  // when covariances of a new analysis came
 int analyses = 0;  // analyses whose covariances came
 double hidden_loads = -1;  // N, the sum /diagnostics reports
 double analysis_time = -1;  // s, the processor time of the last analysis, as /diagnostics reports it
-long steps = -1, factorizations = -1;  // /diagnostics: steps and the factorisations in them
+long steps = -1, factorizations = -1, past_cap = -1;  // /diagnostics: steps, the factorisations in them, the steps iterated past their cap
 
 // The camera in the model frame: at the synthetic view's eye, turned 90 degrees about x, so
 // that camera and model coordinates differ by a rotation and a translation.
@@ -111,6 +111,7 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
             else if (kv.key == "last analysis processor time (s)") analysis_time = std::stod(kv.value);
             else if (kv.key == "steps") steps = std::stol(kv.value);
             else if (kv.key == "factorisations in the steps") factorizations = std::stol(kv.value);
+            else if (kv.key == "steps iterated past their cap") past_cap = std::stol(kv.value);
       }));
   ros::Publisher cloud_pub = nh.advertise<sensor_msgs::PointCloud2>("points", 1);
 
@@ -262,6 +263,8 @@ TEST(RegistrationNode, TracksALiftSeenThroughACameraFrame) {
   // taken under a millisecond.
   EXPECT_GE(factorizations, 1);
   EXPECT_LE(factorizations, 8 * steps);
+  EXPECT_GE(past_cap, 0) << "no count of the steps iterated past their cap on /diagnostics";
+  EXPECT_LE(past_cap, steps);
   EXPECT_GT(analysis_time, 1e-3);
 
   // The targets' uncertainty: every target, in the order of ~target_poses, with a symmetric

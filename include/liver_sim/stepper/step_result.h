@@ -36,8 +36,8 @@ struct StepResult {
   bool out_of_time = false;  // the step stopped at SolverOptions::time_budget
   bool recovery = false;     // after steps rolled back in a row, solved past the frame's iteration
                              // cap and time budget (NewtonStepper::kRecoveryAfterRollbacks)
-  bool past_cap = false;     // far from equilibrium at its iteration cap, iterated on within its
-                             // time budget (SolverOptions::capped_residual)
+  bool past_cap = false;     // far from equilibrium at its iteration cap, an iteration past the
+                             // cap taken within its time budget (SolverOptions::capped_residual)
   StepTiming timing;
   std::string message;      // why, when not converged
   bool converged() const { return status == Status::Converged; }

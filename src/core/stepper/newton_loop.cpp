@@ -70,6 +70,7 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     }
     x_.swap(x_try_);
     r_.swap(r_try_);
+    if (s.done() > iteration_cap()) result.past_cap = true;
     take_faults_after_update();
     update.end_iteration({r_try_, s.norm, taken.norm, fresh_factor, contact_update});  // r_try_: where it started
     s.norm = taken.norm;
@@ -102,11 +103,7 @@ bool NewtonStepper::solve_ends(Solve& s) {
     return true;
   }
   const int cap = iteration_cap();
-  if (s.done() >= cap && drifting(s)) {
-    s.result.past_cap = true;
-    return false;
-  }
-  if (s.done() >= cap) {
+  if (s.done() >= cap && !drifting(s)) {
     // Capped but closer to equilibrium: kept, the next step continues (real-time frames).
     // No closer after all the iterations: stalled, rolled back like a divergence. A step
     // capped below kStallIterations is a real-time frame absorbing a new input, whose merit
@@ -177,7 +174,7 @@ bool NewtonStepper::newton_update(UpdateStrategy& update, Solve& s, bool fresh_f
     const std::vector<char>& fixed = mechanics_.fixed_dofs();
     for (int i = 0; i < out.size(); ++i) out[i] = fixed[i] ? v[i] : (r_[i] - out[i]) / h;
   };
-  result.linear_iterations += update.solve({r_, forcing, force_tolerance, jacobian, result, deadline_}, dx_);
+  result.linear_iterations += update.solve({r_, forcing, force_tolerance, jacobian, result, deadline_of(s.done())}, dx_);
   result.timing.solve_ms += ms_since(t0);
   if (take_fault(InjectedFault::NonFinite)) dx_[0] = std::numeric_limits<double>::quiet_NaN();
   if (!dx_.allFinite()) {
