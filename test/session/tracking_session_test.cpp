@@ -172,6 +172,48 @@ TEST(TrackingSession, NamedInstrumentsTakeSlotsGoStaleAndAreReleasedOnReset) {
   EXPECT_EQ(session.model().positions(), rest);
 }
 
+TEST(TrackingSession, CountsTheStepsIteratedPastTheirCapUntilAReset) {
+  // A probe just above the cube, then pressed 0.8 mm into it in one frame of one iteration a
+  // stage, with a time budget (far more than the frame needs): that frame cannot come within
+  // solver.capped_residual in its last stage's one iteration and iterates on; the count the node
+  // shows on /diagnostics says one step, and a reset clears it with the steps.
+  // Kills the count not kept and the count not reset (each tried).
+  TestClock clock;
+  SessionOptions o;
+  o.clock = clock.function();
+  Scene scene = probe_cube();
+  scene.solver.strategy = SolverOptions::Strategy::ModifiedNewton;
+  scene.solver.max_iterations = 1;
+  scene.solver.time_budget = 1000.0;
+  TrackingSession session(load_scene_mesh(scene), scene, o);
+  InstrumentRequest declare;
+  declare.name = "pointer";
+  declare.type = "probe";
+  declare.radius = 0.002;
+  ASSERT_TRUE(session.submit(declare));
+  InstrumentPose pose{"pointer", Eigen::Vector3d(0.0075, 0.0075, 0.0172), Eigen::Quaterniond::Identity(), 1, 1};
+  session.submit(pose);
+  FrameReport r = session.advance();
+  ASSERT_TRUE(r.stepped);
+  EXPECT_FALSE(r.step.past_cap) << "the probe above the cube touches nothing";
+  EXPECT_EQ(session.steps_past_cap(), 0u);
+
+  pose.position.z() = 0.0162;
+  pose.stamp = 2;
+  session.submit(pose);
+  r = session.advance();
+  ASSERT_TRUE(r.stepped);
+  ASSERT_GT(r.step.contacts, 0);
+  EXPECT_GT(r.step.iterations, 2) << "two stages of one iteration each, then iterations past the cap";
+  EXPECT_TRUE(r.step.past_cap);
+  EXPECT_EQ(session.steps_past_cap(), 1u);
+  EXPECT_GE(session.steps(), 2u);
+
+  session.submit(Reset{});
+  session.advance();
+  EXPECT_EQ(session.steps_past_cap(), 0u);
+}
+
 TEST(TrackingSession, AnInputWakesTheFrameWaitUntilTheFrameTakesIt) {
   // The node starts a frame when an input arrives (frame_pacing.h): every kind of input wakes
   // the wait, and a frame takes what came before it. Guards against an input kind that does
