@@ -49,6 +49,15 @@ Scene probe_cube() {
   return s;
 }
 
+// The request that declares the tests' 2 mm probe, "pointer".
+InstrumentRequest pointer_probe() {
+  InstrumentRequest declare;
+  declare.name = "pointer";
+  declare.type = "probe";
+  declare.radius = 0.002;
+  return declare;
+}
+
 TEST(TrackingSession, RegistersTheLatestCloudAsTheDirectCompositionDoes) {
   // Two clouds before a frame: the frame registers the second alone, to the same bits as the
   // model and registration composed by hand; the analysis in frame equals the hand-made
@@ -128,10 +137,7 @@ TEST(TrackingSession, NamedInstrumentsTakeSlotsGoStaleAndAreReleasedOnReset) {
   const Scene scene = probe_cube();
   TrackingSession session(load_scene_mesh(scene), scene, o);
   const Eigen::VectorXd rest = session.model().positions();
-  InstrumentRequest declare;
-  declare.name = "pointer";
-  declare.type = "probe";
-  declare.radius = 0.002;
+  InstrumentRequest declare = pointer_probe();
   ASSERT_TRUE(session.submit(declare));
   InstrumentPose pose{"pointer", Eigen::Vector3d(0.0075, 0.0075, 0.027), Eigen::Quaterniond::Identity(), 7, 1};
   session.submit(pose);
@@ -186,11 +192,7 @@ TEST(TrackingSession, CountsTheStepsIteratedPastTheirCapUntilAReset) {
   scene.solver.max_iterations = 1;
   scene.solver.time_budget = 1000.0;
   TrackingSession session(load_scene_mesh(scene), scene, o);
-  InstrumentRequest declare;
-  declare.name = "pointer";
-  declare.type = "probe";
-  declare.radius = 0.002;
-  ASSERT_TRUE(session.submit(declare));
+  ASSERT_TRUE(session.submit(pointer_probe()));
   InstrumentPose pose{"pointer", Eigen::Vector3d(0.0075, 0.0075, 0.0172), Eigen::Quaterniond::Identity(), 1, 1};
   session.submit(pose);
   FrameReport r = session.advance();
@@ -226,10 +228,7 @@ TEST(TrackingSession, AnInputWakesTheFrameWaitUntilTheFrameTakesIt) {
   const auto now = [] { return InputSignal::Clock::now(); };
   session.advance();
   EXPECT_FALSE(session.wait_for_input(now()));
-  InstrumentRequest declare;
-  declare.name = "pointer";
-  declare.type = "probe";
-  declare.radius = 0.002;
+  const InstrumentRequest declare = pointer_probe();
   const std::vector<std::function<void()>> inputs = {
       [&] { ASSERT_TRUE(session.submit(declare)); },
       [&] { session.submit(InstrumentPose{"pointer", Eigen::Vector3d(0, 0, 0.05), Eigen::Quaterniond::Identity(), 1, 1}); },
