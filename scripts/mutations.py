@@ -336,4 +336,12 @@ MUTATIONS = [
       "s.result.iterations < kRecoveryIterations && Clock::now()",
       "Clock::now()",
       "a frame far from equilibrium iterates on past 50 iterations"),
+    M("R20", "src/core/stepper/newton_loop.cpp",
+      "force_tolerance = std::max(force_tolerance, std::min(0.1, s.merit / s.reference) * s.merit);",
+      "force_tolerance = std::max(force_tolerance, 0.0);",
+      "budgeted frames solve their contact problem to the converged solve's tolerance"),
+    M("R21", "src/core/stepper/newton_loop.cpp",
+      "if (std::isfinite(solver_.time_budget))\n    force_tolerance",
+      "if (true)\n    force_tolerance",
+      "converged solves end their contact problem at the budgeted frames' share"),
 ]
