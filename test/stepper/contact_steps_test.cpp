@@ -203,6 +203,7 @@ struct HapticSweep {
   double error = 0, peak = 0, gap = 0;  // m: the largest distance to converged dynamics, motion, gap
   int contacts = 0;                     // loaded contacts of the converged frames, summed
   int most_sweeps = 0;                  // the most Gauss-Seidel sweeps of a frame's contact solves
+  int out_of_time = 0;                  // frames that ended out of time
 };
 HapticSweep haptic_sweep(const Scene& tracked) {
   Scene converged = tracked;
@@ -224,6 +225,7 @@ HapticSweep haptic_sweep(const Scene& tracked) {
     out.peak = std::max(out.peak, (reference.positions() - rest).cwiseAbs().maxCoeff());
     out.error = std::max(out.error, (model.positions() - reference.positions()).cwiseAbs().maxCoeff());
     out.gap = std::max(out.gap, model.contact().violation(model.positions()));
+    out.out_of_time += m.out_of_time;
   }
   return out;
 }
@@ -248,6 +250,19 @@ TEST(Probe, DampedHapticFramesCloseNewGaps) {
   ASSERT_GT(run.contacts, 0) << "the probe never touched the block";
   EXPECT_LE(run.gap, kTolerance);
   EXPECT_LE(run.error, 0.01 * run.peak);
+}
+
+// The same frames with a budget that no factorisation fits in (only the first iteration of each
+// frame runs). A frame whose contact update on a kept factor the line search cut short has its
+// redo on a fresh factor refused by the budget: it keeps the descent it found, ends at its cap,
+// and the next frame starts with the factorisation. Only a frame whose iteration found no
+// descent ends out of time, where it started: 1 of the 300 here. Kills the descent undone as
+// well (R19: 10 frames out of time, 1.21% of the motion from converged dynamics against 1.04%).
+TEST(Probe, BudgetedHapticFramesKeepACutContactUpdate) {
+  const HapticSweep run = haptic_sweep(haptic_frames(1e-9));
+  ASSERT_GT(run.contacts, 0) << "the probe never touched the block";
+  EXPECT_LE(run.out_of_time, 2);
+  EXPECT_LE(run.error, 0.02 * run.peak);
 }
 
 // Frames with a time budget solve their contact problem no further than the iteration needs: a

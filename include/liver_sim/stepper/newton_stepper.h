@@ -185,9 +185,11 @@ class NewtonStepper {
   bool factorize(StepResult& result);
   // Backtracking from x_ along dx_ into x_try_, r_try_.
   LineSearch line_search(const Solve& s, bool contact_update);
-  // An iteration without descent on an old factor: undone, to be redone on a fresh factor when
-  // its factorisation fits in the time left (true); else the step ends here.
-  bool undo_for_fresh_factor(Solve& s, bool contact_update);
+  // An iteration without descent (or a contact update cut short) on an old factor: undone, to be
+  // redone on a fresh factor when its factorisation fits in the time left; else the step ends,
+  // with the iteration kept when it descended, and the next step factorises first.
+  enum class Redo { Redone, Undone, Kept };
+  Redo redo_on_fresh_factor(Solve& s, bool contact_update, bool descended);
   // Dynamic steps: the mechanical energy (kinetic + elastic) and the work of the loads and of
   // the constraints over the step that ended at x_ (J).
   double mechanical_energy(const Eigen::VectorXd& x, const Eigen::VectorXd& v);
