@@ -1,5 +1,6 @@
-// Steps with a probe in contact: dynamic presses settle on the static equilibrium, and a factor
-// serves the iterations after the one that made it, and damped haptic frames close new gaps.
+// Steps with a probe in contact: dynamic presses settle on the static equilibrium, a factor
+// serves the iterations after the one that made it, damped haptic frames close new gaps, and
+// budgeted ones keep a cut contact update and solve their contacts only as far as they need.
 #include <gtest/gtest.h>
 
 #include <chrono>
