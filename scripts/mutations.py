@@ -345,7 +345,7 @@ MUTATIONS = [
       "force_tolerance = std::max(force_tolerance, 0.0);",
       "budgeted frames solve their contact problem to the converged solve's tolerance"),
     M("R21", "src/core/stepper/newton_loop.cpp",
-      "if (std::isfinite(solver_.time_budget))\n    force_tolerance",
-      "if (true)\n    force_tolerance",
+      "if (std::isfinite(solver_.time_budget) && !recovering_)\n    force_tolerance",
+      "if (!recovering_)\n    force_tolerance",
       "converged solves end their contact problem at the budgeted frames' share"),
 ]

@@ -186,8 +186,8 @@ class NewtonStepper {
   // Backtracking from x_ along dx_ into x_try_, r_try_.
   LineSearch line_search(const Solve& s, bool contact_update);
   // An iteration without descent (or a contact update cut short) on an old factor: undone, to be
-  // redone on a fresh factor when its factorisation fits in the time left; else the step ends,
-  // with the iteration kept when it descended, and the next step factorises first.
+  // redone on a fresh factor when its factorisation fits in the time left; else kept when it
+  // descended (the next iteration or step factorises first), or the step ends where it started.
   enum class Redo { Redone, Undone, Kept };
   Redo redo_on_fresh_factor(Solve& s, bool contact_update, bool descended);
   // Dynamic steps: the mechanical energy (kinetic + elastic) and the work of the loads and of

@@ -65,7 +65,7 @@ void NewtonStepper::newton(StepResult& result, bool contacts_detected) {
     const bool no_descent = taken.merit >= s.merit && (!taken.accepted || s.done() == iteration_cap());
     if (update.redoes_without_descent() && !fresh_factor && !s.refreshed &&
         (no_descent || (contact_update && taken.alpha < 1))) {
-      const Redo redo = redo_on_fresh_factor(s, contact_update, !no_descent && taken.merit < s.merit);
+      const Redo redo = redo_on_fresh_factor(s, contact_update, taken.merit < s.merit);
       if (redo == Redo::Redone) continue;
       if (redo == Redo::Undone) break;
     }
@@ -169,9 +169,10 @@ bool NewtonStepper::newton_update(UpdateStrategy& update, Solve& s, bool fresh_f
   // iteration starts from equal to the relative residual (Eisenstat and Walker's quadratic
   // forcing): solved to round-off, 42 of 400 contact solves of the probe cube's 1 ms frames ran
   // to the 1,000-sweep cap (doc/performance.md). Not in converged solves: Gauss-Seidel's change
-  // per sweep, which judges the contact problem, understates its error where it converges slowly.
+  // per sweep, which judges the contact problem, understates its error where it converges slowly;
+  // nor in a recovery step, which is to converge.
   double force_tolerance = 0.1 * std::max(solver_.tolerance * s.reference, mechanics_.force_floor());
-  if (std::isfinite(solver_.time_budget))
+  if (std::isfinite(solver_.time_budget) && !recovering_)
     force_tolerance = std::max(force_tolerance, std::min(0.1, s.merit / s.reference) * s.merit);
   // Captures `this` only: a std::function keeps that without an allocation.
   const Gmres::Operator jacobian = [this](const Eigen::VectorXd& v, Eigen::VectorXd& out) {
