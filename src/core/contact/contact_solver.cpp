@@ -7,10 +7,19 @@
 namespace liver_sim {
 namespace {
 
+// A contact's diagonal block of W and its factors, made once per solve (each sweep solves with
+// them again: factorised anew every sweep, they were a third of the sweeps' time).
+struct LocalBlock {
+  Eigen::Matrix3d Wcc;
+  Eigen::LDLT<Eigen::Matrix3d> all;          // the three rows
+  Eigen::LDLT<Eigen::Matrix2d> tangential;   // the two slips
+};
+
 // The contact's forces that zero its own rows with the others held (delta_c: its rows now).
-Eigen::Vector3d local_solution(const Eigen::Matrix3d& Wcc, const Eigen::Vector3d& delta_c,
-                               const Eigen::Vector3d& lambda_c, bool bilateral, double mu) {
-  const Eigen::Vector3d full = lambda_c - Wcc.ldlt().solve(delta_c);
+Eigen::Vector3d local_solution(const LocalBlock& b, const Eigen::Vector3d& delta_c, const Eigen::Vector3d& lambda_c,
+                               bool bilateral, double mu) {
+  const Eigen::Matrix3d& Wcc = b.Wcc;
+  const Eigen::Vector3d full = lambda_c - b.all.solve(delta_c);
   if (bilateral) return full;
   if (mu == 0) {
     // Normal row only; the tangential forces vanish.
@@ -21,8 +30,7 @@ Eigen::Vector3d local_solution(const Eigen::Matrix3d& Wcc, const Eigen::Vector3d
   // Slides: the tangential force on the cone's edge, along the tangential trial force, and the
   // normal force that closes the gap with it; a normal force <= 0 means the contact separates.
   const Eigen::Vector2d trial =
-      full[0] > 0 ? Eigen::Vector2d(full.tail<2>())
-                  : Eigen::Vector2d(lambda_c.tail<2>() - Wcc.bottomRightCorner<2, 2>().ldlt().solve(delta_c.tail<2>()));
+      full[0] > 0 ? Eigen::Vector2d(full.tail<2>()) : Eigen::Vector2d(lambda_c.tail<2>() - b.tangential.solve(delta_c.tail<2>()));
   const Eigen::Vector2d d = trial.norm() > 0 ? Eigen::Vector2d(trial.normalized()) : Eigen::Vector2d::Zero();
   const double denominator = Wcc(0, 0) + mu * Wcc.row(0).tail<2>().dot(d);
   const double rhs = Wcc(0, 0) * lambda_c[0] + Wcc.row(0).tail<2>().dot(lambda_c.tail<2>()) - delta_c[0];
@@ -44,18 +52,24 @@ ContactSolveResult solve_frictional_contacts(const Eigen::MatrixXd& W, const Eig
     return result;
   }
   Eigen::VectorXd delta = delta0;  // kept current as lambda changes
+  std::vector<LocalBlock> blocks(m);
+  for (int c = 0; c < m; ++c) {
+    LocalBlock& b = blocks[c];
+    b.Wcc = W.block<3, 3>(3 * c, 3 * c);
+    b.all.compute(b.Wcc);
+    b.tangential.compute(b.Wcc.bottomRightCorner<2, 2>());
+  }
   Eigen::Vector3d change;
   for (result.sweeps = 1; result.sweeps <= max_sweeps; ++result.sweeps) {
     result.last_change = 0;
     for (int c = 0; c < m; ++c) {
-      const Eigen::Matrix3d Wcc = W.block<3, 3>(3 * c, 3 * c);
       const Eigen::Vector3d updated =
-          local_solution(Wcc, delta.segment<3>(3 * c), lambda.segment<3>(3 * c), bilateral[c], friction);
+          local_solution(blocks[c], delta.segment<3>(3 * c), lambda.segment<3>(3 * c), bilateral[c], friction);
       change = updated - lambda.segment<3>(3 * c);
       if (change.isZero(0.0)) continue;
       lambda.segment<3>(3 * c) = updated;
       delta.noalias() += W.middleCols<3>(3 * c) * change;
-      result.last_change = std::max(result.last_change, (Wcc * change).cwiseAbs().maxCoeff());
+      result.last_change = std::max(result.last_change, (blocks[c].Wcc * change).cwiseAbs().maxCoeff());
     }
     if (result.last_change <= tolerance) {
       result.converged = true;
