@@ -187,7 +187,8 @@ class NewtonStepper {
   LineSearch line_search(const Solve& s, bool contact_update);
   // An iteration without descent (or a contact update cut short) on an old factor: undone, to be
   // redone on a fresh factor when its factorisation fits in the time left; else kept when it
-  // descended (the next iteration or step factorises first), or the step ends where it started.
+  // descended (the next iteration or step factorises first), or the step ends where the
+  // iteration started.
   enum class Redo { Redone, Undone, Kept };
   Redo redo_on_fresh_factor(Solve& s, bool contact_update, bool descended);
   // Dynamic steps: the mechanical energy (kinetic + elastic) and the work of the loads and of

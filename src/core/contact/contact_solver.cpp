@@ -8,11 +8,12 @@ namespace liver_sim {
 namespace {
 
 // A contact's diagonal block of W and its factors, made once per solve (each sweep solves with
-// them again: factorised anew every sweep, they were a third of the sweeps' time).
+// them again: factorised anew every sweep, they took a fifth of the contact solve's time in the
+// cube probe's frames).
 struct LocalBlock {
   Eigen::Matrix3d Wcc;
   Eigen::LDLT<Eigen::Matrix3d> all;          // the three rows
-  Eigen::LDLT<Eigen::Matrix2d> tangential;   // the two slips
+  Eigen::LDLT<Eigen::Matrix2d> tangential;   // the two slips (a sliding unilateral contact)
 };
 
 // The contact's forces that zero its own rows with the others held (delta_c: its rows now).
@@ -57,7 +58,7 @@ ContactSolveResult solve_frictional_contacts(const Eigen::MatrixXd& W, const Eig
     LocalBlock& b = blocks[c];
     b.Wcc = W.block<3, 3>(3 * c, 3 * c);
     b.all.compute(b.Wcc);
-    b.tangential.compute(b.Wcc.bottomRightCorner<2, 2>());
+    if (friction > 0 && !bilateral[c]) b.tangential.compute(b.Wcc.bottomRightCorner<2, 2>());
   }
   Eigen::Vector3d change;
   for (result.sweeps = 1; result.sweeps <= max_sweeps; ++result.sweeps) {
