@@ -53,7 +53,10 @@ ContactSolveResult solve_frictional_contacts(const Eigen::MatrixXd& W, const Eig
     return result;
   }
   Eigen::VectorXd delta = delta0;  // kept current as lambda changes
-  std::vector<LocalBlock> blocks(m);
+  // Kept between the solves of this thread: a frame allocates them only when its contacts
+  // outnumber every earlier frame's.
+  thread_local std::vector<LocalBlock> blocks;
+  blocks.resize(m);
   for (int c = 0; c < m; ++c) {
     LocalBlock& b = blocks[c];
     b.Wcc = W.block<3, 3>(3 * c, 3 * c);
